@@ -60,10 +60,9 @@ def build_one(spec: FmuSpec, out: Path, force: bool = False, digest: str | None 
     out.mkdir(parents=True, exist_ok=True)
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))  # the slave scripts import the fmu_src package
-    tmp = out / f"{spec.name}.fmu.partial"
-    FmuBuilder.build_FMU(SOURCE / spec.script, dest=tmp.with_suffix(".fmu").with_name(tmp.name + ".fmu"),
-                         project_files=[SOURCE], **CAPABILITIES)
-    (out / (tmp.name + ".fmu")).replace(target)  # never leave a half-written FMU under its real name
+    partial = out / f".{spec.name}.partial.fmu"
+    FmuBuilder.build_FMU(SOURCE / spec.script, dest=partial, project_files=[SOURCE], **CAPABILITIES)
+    partial.replace(target)  # never leave a half-written FMU under its real name
     stamp.write_text(digest)
     return target
 
