@@ -1,0 +1,75 @@
+"""ground_motion.fmu: plays a recorded ground acceleration (a source, no inputs).
+
+The record (``fmu_src/ground_records.py``) is loaded once, at the end of initialisation:
+a bundled name (shipped inside the FMU as ``resources/fmu_src/records``) or a file path
+(PEER ``.AT2``, single column with ``dt``, or ``time, acceleration`` CSV).  A bad file makes
+``fmi2ExitInitializationMode`` fail with a message naming the file and the line.
+
+Per doStep ``[t, t + h]`` the outputs are exact for the piecewise-linear record (zero before
+its first and after its last sample): ``ag`` at ``t + h``, ``ag_mean`` the mean over the step
+(what a zero-order-hold building needs: its velocity increments are then exact), the ground
+velocity ``vg`` and displacement ``dg`` at ``t + h``.
+"""
+from __future__ import annotations
+
+from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
+from fmu_src.ground_records import FORMATS, UNITS, load_record
+
+
+class GroundMotion(Fmi2Slave):
+    """Recorded ground acceleration in SI units (see module docstring)."""
+
+    DESCRIPTION = "Recorded ground acceleration (bundled SLAMMER/PEER records or PEER AT2, column, CSV files)"
+    DEFAULT_EXPERIMENT = (0.0, 40.0, 0.01)
+    VARIABLES = (
+        Variable("record", "String", start="elcentro1940",
+                 description="bundled record (elcentro1940 kobe1995 sanfernando1971 parkfield1966) or a file path"),
+        Variable("format", "String", start="auto", choices=FORMATS, description="file format"),
+        Variable("dt", start=0.0, unit="s", low=0.0,
+                 description="sampling interval of a single-column file; 0 = from the file"),
+        Variable("units", "String", start="g", choices=tuple(UNITS), description="units of the values in the file"),
+        Variable("scale", start=1.0, description="factor on the record (ignored if target_pga > 0)"),
+        Variable("target_pga", start=0.0, unit="m/s2", low=0.0,
+                 description="scale the record to this peak ground acceleration; 0 = use scale"),
+        Variable("time_shift", start=0.0, unit="s", description="time of the first sample"),
+        Variable("ag", causality="output", unit="m/s2", description="ground acceleration at the end of the step"),
+        Variable("ag_mean", causality="output", unit="m/s2", description="mean ground acceleration over the last step"),
+        Variable("vg", causality="output", unit="m/s", description="ground velocity at the end of the step"),
+        Variable("dg", causality="output", unit="m", description="ground displacement at the end of the step"),
+        Variable("pga", causality="output", unit="m/s2", description="peak ground acceleration of the (scaled) record"),
+        Variable("duration", causality="output", unit="s", description="record length (npts - 1) dt"),
+        Variable("t_end", causality="output", unit="s",
+                 description="time of the last sample (time_shift + duration); zero motion afterwards"),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._record = None
+        self._start_time = 0.0
+
+    def setup_experiment(self, start_time, stop_time, tolerance):
+        self._start_time = float(start_time or 0.0)
+
+    def initialize(self) -> None:
+        try:
+            record = load_record(self.record, fmt=self.format, dt=self.dt or None, units=self.units,
+                                 scale=self.scale, target_pga=self.target_pga or None,
+                                 time_shift=self.time_shift)
+        except ValueError as exc:  # RecordError names the file and line
+            raise SlaveError(f"record = {self.record!r}: {exc}") from None
+        self._record = record
+        self.pga = record.pga
+        self.duration = record.duration
+        self.t_end = record.end_time
+        t = self._start_time
+        self.ag = self.ag_mean = record.at(t)
+        self.vg = record.velocity(t)
+        self.dg = record.displacement(t)
+
+    def step(self, current_time: float, step_size: float) -> None:
+        record = self._record
+        t1 = current_time + step_size
+        self.ag = record.at(t1)
+        self.ag_mean = record.mean_over(current_time, t1)
+        self.vg = record.velocity(t1)
+        self.dg = record.displacement(t1)
