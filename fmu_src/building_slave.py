@@ -74,8 +74,8 @@ class Building(Fmi2Slave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         # Storey elements are checked only up to n_storeys (in validate): unused ones are ignored.
-        self._element_checks = tuple(v for v in self._checked if v.index is not None)
-        self._checked = [v for v in self._checked if v.index is None]
+        self._element_checks = tuple(slot for slot in self._checked if slot[2] is not None)
+        self._checked = [slot for slot in self._checked if slot[2] is None]
         # The finite-input check is done in step(), vectorised over the active storeys: the
         # per-variable loop of the base class costs more than the step itself (21 inputs).
         self._real_inputs = []
@@ -84,9 +84,9 @@ class Building(Fmi2Slave):
 
     def validate(self):
         n = int(self.n_storeys)
-        for var in self._element_checks:
-            if var.index < n:
-                msg = var.violation(getattr(self, var.attribute)[var.index])
+        for var, attr, idx in self._element_checks:
+            if idx < n:
+                msg = var.violation(getattr(self, attr)[idx])
                 if msg:
                     yield msg
 
@@ -144,7 +144,7 @@ class Building(Fmi2Slave):
         if not math.isfinite(ag):
             return f"input ag = {ag!r} m/s2 is not finite"
         i = int(np.flatnonzero(~np.isfinite(f))[0])
-        return f"input F[{i + 1}] = {f[i]!r} N is not finite"
+        return f"input F[{i + 1}] = {float(f[i])!r} N is not finite"
 
     def step(self, current_time: float, step_size: float) -> None:
         G = self._steps.get(step_size)

@@ -98,6 +98,8 @@ class Variable:
 
     def violation(self, value: Any) -> str | None:
         """Return why ``value`` is not allowed, or None if it is."""
+        if isinstance(value, np.generic):  # report 5.0, not np.float64(5.0)
+            value = value.item()
         if self.choices is not None:
             if value not in self.choices:
                 return f"{self.name} = {value!r} is not allowed: {self.allowed_range()}"
@@ -144,8 +146,9 @@ class SlaveBase(Fmi2Slave):
         start, stop, step = self.DEFAULT_EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self._error: str | None = None
-        self._real_inputs: list[Variable] = []
-        self._checked: list[Variable] = []
+        # (variable, attribute, index) triples, resolved once: do_step runs thousands of times
+        self._real_inputs: list[tuple[Variable, str, int | None]] = []
+        self._checked: list[tuple[Variable, str, int | None]] = []
         arrays: dict[str, int] = {}
         for var in self.VARIABLES:
             if var.index is not None:
@@ -155,11 +158,12 @@ class SlaveBase(Fmi2Slave):
             setattr(self, attr, np.zeros(size, dtype=dtype))
         for var in self.VARIABLES:
             self._register(var)
+            slot = (var, var.attribute, var.index)
             if var.causality == "input" and var.type == "Real":
-                self._real_inputs.append(var)
+                self._real_inputs.append(slot)
             if var.causality == "parameter" and (var.low is not None or var.high is not None
                                                   or var.choices is not None or var.type == "Real"):
-                self._checked.append(var)
+                self._checked.append(slot)
 
     # -- declaration ---------------------------------------------------------------------------
     def _register(self, var: Variable) -> None:
@@ -239,8 +243,8 @@ class SlaveBase(Fmi2Slave):
     # -- FMI entry points ------------------------------------------------------------------------
     def exit_initialization_mode(self):
         problems = []
-        for var in self._checked:
-            value = getattr(self, var.attribute) if var.index is None else getattr(self, var.attribute)[var.index]
+        for var, attr, idx in self._checked:
+            value = getattr(self, attr) if idx is None else getattr(self, attr)[idx]
             msg = var.violation(value)
             if msg:
                 problems.append(msg)
@@ -267,8 +271,8 @@ class SlaveBase(Fmi2Slave):
             self.log(f"{self.instance_name}: communication step size = {step_size!r} s must be > 0",
                      Fmi2Status.error)
             return False
-        for var in self._real_inputs:
-            value = getattr(self, var.attribute) if var.index is None else getattr(self, var.attribute)[var.index]
+        for var, attr, idx in self._real_inputs:
+            value = getattr(self, attr) if idx is None else getattr(self, attr)[idx]
             if not math.isfinite(value):
                 self.log(f"{self.instance_name}: input {var.name} = {value!r} is not finite "
                          f"at t = {current_time:.9g} s", Fmi2Status.error)
