@@ -32,7 +32,6 @@ import json
 import math
 import re
 import shutil
-import tempfile
 import warnings
 import zipfile
 from dataclasses import dataclass, field
@@ -132,8 +131,8 @@ _TOKEN = re.compile(r"^([A-Za-z]+|1)(?:\^?(-?\d+(?:\.\d+)?))?$")
 def base_unit(unit: str) -> dict[str, float] | None:
     """SI base-unit exponents of a unit string such as ``m/s2``, ``N/m^1.5`` or ``N.s/m``.
 
-    Returns None for a unit this parser does not know (the connector then carries no
-    unit, which SSP allows).
+    Returns None for a unit this parser does not know or whose exponents are not
+    integers (the connector then carries no unit, which SSP allows).
     """
     exponents: dict[str, float] = {}
     parts = unit.replace(" ", "").split("/")
@@ -147,6 +146,8 @@ def base_unit(unit: str) -> dict[str, float] | None:
             power = float(match.group(2)) if match.group(2) else 1.0
             for base, exp in _SYMBOLS[match.group(1)].items():
                 exponents[base] = exponents.get(base, 0.0) + sign * power * exp
+    if any(not float(v).is_integer() for v in exponents.values()):
+        return None  # SSP BaseUnit exponents are integers (e.g. N/m^1.5 has none)
     return {k: v for k, v in exponents.items() if v != 0.0}
 
 
@@ -594,3 +595,40 @@ def load_ssp(path: Path | str, extract_to: Path | str):
                 f"{odd[0][2]}.{odd[0][3]} (x {odd[0][4]:g}) is {'extra' if found - expected else 'missing'}")
         raise NotExpressibleError(f"{path}: {what}")
     return scene
+
+
+def export_cli(scene: str | Path, path: Path | str, overrides: Iterable[str] = (), *, coupling: str | None = None,
+               step: float | None = None, stop_time: float | None = None,
+               fmu_dir: Path | str | None = None) -> int:
+    """``python cosim/run.py SCENE --export-ssp FILE.ssp``: load the scene as a run would
+    (overrides, ``--coupling``, ``--step``, ``--stop-time``), write the package, print the
+    notes.  Exit code 0, or 2 with one ``error:`` line for a scene SSP cannot express or
+    invalid input."""
+    import sys
+
+    from cosim.master import Catalog
+    from cosim.run import default_fmu_dir
+    from cosim.scene import SceneError, load_scene
+
+    extra = list(overrides)
+    if coupling is not None:
+        extra.append(f'coupling="{coupling}"')
+    if step is not None:
+        extra.append(f"step={float(step)!r}")
+    if stop_time is not None:
+        extra.append(f"stop_time={float(stop_time)!r}")
+    try:
+        fmu_dir = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
+        with Catalog(fmu_dir) as catalog:
+            loaded = load_scene(scene, extra, catalog)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SspWarning)  # printed below as notes
+            out, notes = export_scene(loaded, path, fmu_dir)
+    except (NotExpressibleError, SceneError, ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for note in notes:
+        print(f"note: {note}")
+    print(f"SSP 1.0 package: {out} ({len(loaded.instances())} components, "
+          f"{len(loaded.connections())} connections)")
+    return 0

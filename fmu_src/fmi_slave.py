@@ -17,8 +17,9 @@ class does the FMI bookkeeping that pythonfmu leaves to the author:
 * FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``) includes the private
   attributes listed in ``PRIVATE_STATE``, deep-copied, so that a restored
   instance continues exactly as the saved one;
-* the modelDescription gets units, ``UnitDefinitions``, min/max and
-  ``initial="exact"`` on every output (``fmpy validate`` needs the latter).
+* the modelDescription gets units, ``UnitDefinitions``, min/max, and every output is
+  ``initial="calculated"`` (computed when initialisation ends) and listed in
+  ``ModelStructure/InitialUnknowns``, which pythonfmu alone leaves out.
 
 Nothing here is mutable at module or class level: every FMU of a process
 shares one Python interpreter.
@@ -168,7 +169,10 @@ class SlaveBase(Fmi2Slave):
     # -- declaration ---------------------------------------------------------------------------
     def _register(self, var: Variable) -> None:
         cls = _TYPES[var.type]
-        initial = Fmi2Initial.exact if var.causality == "output" else None
+        # Outputs are computed at fmi2ExitInitializationMode (from parameters and x0...), so
+        # they are initial="calculated" and listed in InitialUnknowns (written in to_xml).
+        output = var.causality == "output"
+        initial = Fmi2Initial.calculated if output else None
         causality = getattr(Fmi2Causality, var.causality)
         variability = getattr(Fmi2Variability, var.resolved_variability)
         idx = var.index
@@ -183,7 +187,8 @@ class SlaveBase(Fmi2Slave):
             setter = self._element_setter(attr, idx)
         self.register_variable(
             cls(var.name, causality=causality, variability=variability, initial=initial,
-                description=self._describe(var), getter=getter, setter=setter, start=var.start),
+                description=self._describe(var), getter=getter, setter=setter,
+                start=None if output else var.start),
             nested=False,
         )
 
@@ -205,7 +210,7 @@ class SlaveBase(Fmi2Slave):
         return text
 
     def to_xml(self, model_options: dict[str, str] = dict()) -> Element:
-        """Model description with units, ranges and initial="exact" outputs."""
+        """Model description with units, ranges, and calculated outputs listed as InitialUnknowns."""
         root = super().to_xml(model_options)
         by_name = {v.name: v for v in self.VARIABLES}
         units = sorted({v.unit for v in self.VARIABLES if v.unit and v.type == "Real"})
@@ -216,6 +221,12 @@ class SlaveBase(Fmi2Slave):
             # FMI 2.0 orders UnitDefinitions before LogCategories/DefaultExperiment.
             position = [i for i, child in enumerate(root) if child.tag == "CoSimulation"][0] + 1
             root.insert(position, unit_defs)
+        structure = root.find("ModelStructure")
+        outputs = structure.find("Outputs")
+        if outputs is not None:
+            initial_unknowns = SubElement(structure, "InitialUnknowns")
+            for unknown in outputs:
+                SubElement(initial_unknowns, "Unknown", attrib={"index": unknown.attrib["index"]})
         for scalar in root.iter("ScalarVariable"):
             var = by_name[scalar.attrib["name"]]
             typed = scalar[0]

@@ -12,6 +12,8 @@ velocity ``vg`` and displacement ``dg`` at ``t + h``.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
 from fmu_src.ground_records import FORMATS, UNITS, load_record
 
@@ -54,7 +56,7 @@ class GroundMotion(Fmi2Slave):
         try:
             record = load_record(self.record, fmt=self.format, dt=self.dt or None, units=self.units,
                                  scale=self.scale, target_pga=self.target_pga or None,
-                                 time_shift=self.time_shift)
+                                 time_shift=self.time_shift, records_dir=self._records_dir())
         except ValueError as exc:  # RecordError names the file and line
             raise SlaveError(f"record = {self.record!r}: {exc}") from None
         self._record = record
@@ -65,6 +67,14 @@ class GroundMotion(Fmi2Slave):
         self.ag = self.ag_mean = record.at(t)
         self.vg = record.velocity(t)
         self.dg = record.displacement(t)
+
+    def _records_dir(self) -> Path | None:
+        """This FMU's own bundled records (``resources/fmu_src/records``), if it has them."""
+        if self.resources:
+            folder = Path(self.resources) / "fmu_src" / "records"
+            if folder.is_dir():
+                return folder
+        return None
 
     def step(self, current_time: float, step_size: float) -> None:
         record = self._record

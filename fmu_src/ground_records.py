@@ -417,7 +417,8 @@ def _unit_name(units: str) -> str:
 
 
 def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "g", scale: float = 1.0,
-                target_pga: float | None = None, time_shift: float = 0.0) -> Record:
+                target_pga: float | None = None, time_shift: float = 0.0,
+                records_dir: str | Path | None = None) -> Record:
     """Load a ground acceleration record in SI units.
 
     Parameters
@@ -437,6 +438,10 @@ def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "
         Scale the record so that its PGA is this value (m/s^2); ``None`` or ``<= 0``: no target.
     time_shift : float
         The first sample is at ``t = time_shift`` (s); negative values skip the beginning.
+    records_dir : path, optional
+        Folder of the bundled records; default: ``records/`` beside this module.  An FMU passes
+        its own ``resources/fmu_src/records``: every FMU of a process shares one imported
+        ``fmu_src``, whose folder may belong to another, already unloaded FMU.
     """
     if fmt not in FORMATS:
         raise ValueError(f"format = {fmt!r} is not allowed: one of {', '.join(FORMATS)}")
@@ -449,7 +454,7 @@ def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "
     start = 0.0
     if key in BUNDLED:
         meta = BUNDLED[key]
-        path = meta.path
+        path = Path(records_dir) / meta.file if records_dir is not None else meta.path
         if unit != meta.units:
             raise RecordError(path, None, f"bundled record {key!r} is in {meta.units}; units = {units!r} contradicts it")
         samples = _parse_column(path, _lines(path))
