@@ -253,9 +253,9 @@ class ContactLaw:
       the bodies separate where ``k delta + c delta_dot = 0`` (``delta > 0``), which skips
       the tension phase and gives a *higher* CR than the target (CR table).
     * ``jankowski``, ``barros2013``: ``k delta^n + c delta_dot`` in approach
-      (``delta_dot > 0``), ``k delta^n`` in restitution; force drops at maximum penetration
-      only if ``c delta_dot`` is not already zero there (it is: ``delta_dot = 0``), so F is
-      continuous; dF/d(delta) is infinite at onset for n > 1 (``c ~ delta^0.25``).
+      (``delta_dot > 0``), ``k delta^n`` in restitution; F is continuous at maximum
+      penetration because ``c delta_dot`` vanishes there; dF/d(delta) is infinite at onset
+      for n > 1 (``c ~ delta^((n-1)/2)``).  Eq 2.4 was derived for n = 1.5.
     * Hertz-damp family: ``k delta^n (1 + zeta delta_dot / v_imp)`` over the whole contact;
       continuous at onset; clipped at zero in restitution when ``zeta delta_dot < -v_imp``
       (large ``zeta``, i.e. small CR with ``ye`` / ``naderpour2013`` / ``gonthier``).

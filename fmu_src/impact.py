@@ -540,6 +540,7 @@ class ImpactResolver:
             self.d, self.u = d, u
             self.delta_end = d * L
             self.delta_dot_end = u * v
+            self.delta_max = max(self.delta_max, d * L)
 
     def _sample(self, tau, fs, d, u, acc, approaching, out, F0, branch_end=False) -> int:
         """Track the peak force at an accepted point; returns the force evaluations spent.
@@ -674,6 +675,9 @@ class PlainContact:
         self.delta_max = 0.0
         self.impact_time = 0.0
         self.started = False
+        self.last_CR = math.nan     # -delta_dot / v_imp at the first inputs found out of contact
+        self.last_E = 0.0           # J, dissipated by the latest completed contact
+        self._E_at_onset = 0.0
 
     def step(self, delta: float, delta_dot: float, h: float) -> float:
         """Force [N] for the step of length ``h`` [s] starting at the given inputs."""
@@ -688,11 +692,15 @@ class PlainContact:
                 self.v_imp = abs(delta_dot)
                 self.delta_max = 0.0
                 self.impact_time = 0.0
+                self._E_at_onset = self.dissipated_energy()
             self.delta_max = max(self.delta_max, delta)
             self.impact_time += h
             self.F = self.law.force(delta, delta_dot, self.v_imp)
         else:
-            self.in_contact = False
+            if self.in_contact:
+                self.in_contact = False
+                self.last_CR = max(0.0, -delta_dot) / self.v_imp if self.v_imp > 0.0 else math.nan
+                self.last_E = self.dissipated_energy() - self._E_at_onset
             self.F = 0.0
         self.F_max = max(self.F_max, self.F)
         return self.F
@@ -728,13 +736,50 @@ def cr_table(crs=(0.1, 0.2, 0.4, 0.65, 0.8, 0.9, 0.95), ns=(1.5,), rtol: float =
     return "\n".join(lines)
 
 
+def benchmark(repeats: int = 20, CR: float = 0.65, ratios=(None, 0.1, 0.01)) -> str:
+    """Wall time of :class:`ImpactResolver` per impact, per model (prints a markdown table).
+
+    ``ratios``: communication step / contact duration (None: the whole impact in one step).
+    Each cell is the best of ``repeats`` impacts; ``substeps`` is the accepted internal steps.
+    """
+    import time
+    head = " | ".join("one step" if r is None else f"h = t_c x {r:g}" for r in ratios)
+    lines = [f"| model | {head} | substeps (one step) |", "|---|" + "---|" * (len(ratios) + 1)]
+    for model in MODELS:
+        law = ContactLaw(model, 1.8974e11, 1.5, 100.0, published_zeta(model, CR, 1.5))
+        t_c = simulate_impact(law, 10.0, rtol=1e-8).contact_duration
+        cells, subs = [], 0
+        for ratio in ratios:
+            h = 3.0 * t_c if ratio is None else ratio * t_c
+            best = math.inf
+            for _ in range(repeats):
+                r = ImpactResolver(law)
+                delta, count = -0.3 * 10.0 * h, 0
+                t0 = time.perf_counter()
+                out = r.step(delta, 10.0, h)
+                count += out.substeps
+                while r.in_contact:
+                    out = r.step(r.delta_end, r.delta_dot_end, h)
+                    count += out.substeps
+                best = min(best, time.perf_counter() - t0)
+            cells.append(f"{best * 1e3:.2f} ms")
+            if ratio is None:
+                subs = count
+        lines.append(f"| {model} | " + " | ".join(cells) + f" | {subs} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Single-impact tools of the contact models")
     parser.add_argument("--cr-table", action="store_true", help="print achieved CR vs target CR per model")
     parser.add_argument("--n", type=float, nargs="*", default=[1.5], help="stiffness exponents for the table")
+    parser.add_argument("--bench", action="store_true", help="print the in-step resolver's cost per impact")
     args = parser.parse_args(argv)
     if args.cr_table:
         print(cr_table(ns=tuple(args.n)))
+        return 0
+    if args.bench:
+        print(benchmark())
         return 0
     parser.print_help()
     return 0

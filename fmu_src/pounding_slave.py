@@ -1,0 +1,127 @@
+"""pounding.fmu: contact element between two bodies (thin FMI adapter over fmu_src.impact).
+
+Body 1 lies on the negative side of body 2; ``delta = x1 - x2 - gap`` > 0 is penetration.
+The output force ``F`` (>= 0) pushes body 1 towards -x and body 2 towards +x.
+
+With ``resolve_impacts = true`` (default) every impact is located and integrated inside the
+step at its own time scale (:class:`fmu_src.impact.ImpactResolver`) and ``F`` is the mean
+force of the step (``F * h`` = impulse), so the momentum and energy handed to the bodies do
+not depend on where the communication points fall.  With ``false`` the force law is
+evaluated on the current inputs only (:class:`fmu_src.impact.PlainContact`).
+See docs/contact_models.md for the models and the in-step rules.
+"""
+from __future__ import annotations
+
+from fmu_src.contact_laws import MODELS, law_for
+from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, Variable
+from fmu_src.impact import ImpactResolver, PlainContact
+
+_OUT = dict(causality="output")
+
+
+class Pounding(Fmi2Slave):
+    """Impact contact element with ten damping models."""
+
+    DESCRIPTION = ("Pounding contact element: spring-dashpot impact laws (Hertz, Kelvin-Voigt, Jankowski, "
+                   "Hertz-damp family, crvk) with impacts resolved inside each communication step")
+    DEFAULT_EXPERIMENT = (0.0, 1.0, 1e-3)
+
+    VARIABLES = (
+        # parameters
+        Variable("gap", start=0.0, unit="m", low=0.0,
+                 description="initial separation between the bodies; contact when x1 - x2 > gap"),
+        Variable("CR", start=0.65, unit="1", low=0.0, low_open=True, high=1.0,
+                 description="coefficient of restitution: rebound / approach relative speed"),
+        Variable("k", start=2.75e9, unit="N/m^n", low=0.0, low_open=True,
+                 description="contact stiffness (force = k delta^n); default Jankowski 2005, concrete, n = 1.5"),
+        Variable("n", start=1.5, unit="1", low=0.0, low_open=True,
+                 description="stiffness exponent (1 linear, 1.5 Hertz)"),
+        Variable("model", type="String", start="jankowski", choices=MODELS,
+                 description="impact damping model"),
+        Variable("m1", start=1.0e5, unit="kg", low=0.0, low_open=True,
+                 description="mass of body 1 (damping laws use m = m1 m2 / (m1 + m2))"),
+        Variable("m2", start=1.0e5, unit="kg", low=0.0, low_open=True,
+                 description="mass of body 2"),
+        Variable("zeta", start=-1.0, unit="1",
+                 description="dimensionless damping constant of the model; < 0: from CR by the model's "
+                             "published formula (crvk: calibrated to reach CR)"),
+        Variable("resolve_impacts", type="Boolean", start=True,
+                 description="true: locate and integrate impacts inside each step; false: force law on the "
+                             "current inputs only"),
+        # inputs
+        Variable("x1", causality="input", start=0.0, unit="m", description="displacement of body 1"),
+        Variable("v1", causality="input", start=0.0, unit="m/s", description="velocity of body 1"),
+        Variable("x2", causality="input", start=0.0, unit="m", description="displacement of body 2"),
+        Variable("v2", causality="input", start=0.0, unit="m/s", description="velocity of body 2"),
+        # outputs
+        Variable("F", start=0.0, unit="N", **_OUT,
+                 description="contact force, >= 0, on body 2 along +x and on body 1 along -x; resolved mode: "
+                             "mean over the last step (F * h = impulse); plain mode: force law at the inputs"),
+        Variable("F_max", start=0.0, unit="N", **_OUT,
+                 description="largest instantaneous contact force so far"),
+        Variable("delta", start=0.0, unit="m", **_OUT,
+                 description="penetration x1 - x2 - gap (< 0: open); resolved mode: internal state at the end "
+                             "of the step; plain mode: at the inputs"),
+        Variable("delta_dot", start=0.0, unit="m/s", **_OUT,
+                 description="penetration rate (> 0 approaching), same time point as delta"),
+        Variable("in_contact", type="Boolean", start=False, **_OUT,
+                 description="true while an impact is in progress (at the end of the step)"),
+        Variable("E_dissipated", start=0.0, unit="J", **_OUT,
+                 description="energy dissipated by all impacts so far (the current one up to now)"),
+        Variable("impacts", type="Integer", start=0, **_OUT,
+                 description="number of impacts begun so far"),
+        Variable("v_impact", start=0.0, unit="m/s", **_OUT,
+                 description="approach speed of the latest impact (latched at contact onset)"),
+        Variable("CR_achieved", start=0.0, unit="1", **_OUT,
+                 description="rebound / approach speed of the latest completed impact (0 before the first; "
+                             "plain mode: from the first inputs found out of contact)"),
+        Variable("E_last", start=0.0, unit="J", **_OUT,
+                 description="energy dissipated by the latest completed impact"),
+        Variable("impulse", start=0.0, unit="N.s", **_OUT,
+                 description="impulse transmitted during the last step"),
+        Variable("delta_max", start=0.0, unit="m", **_OUT,
+                 description="largest penetration of the latest impact"),
+        Variable("zeta_used", start=0.0, unit="1", **_OUT,
+                 description="damping constant in use (published, calibrated or given)"),
+        Variable("contact_time", start=0.0, unit="s", **_OUT,
+                 description="duration of the latest impact (elapsed, while in progress)"),
+        Variable("substeps", type="Integer", start=0, **_OUT,
+                 description="internal integration steps in the last doStep (cost counter)"),
+    )
+    PRIVATE_STATE = ("_contact",)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._contact = None        # ImpactResolver or PlainContact, built at initialisation
+
+    def initialize(self) -> None:
+        law = law_for(self.model, self.k, self.n, self.m1, self.m2, self.CR, self.zeta)
+        self.zeta_used = law.zeta
+        self._contact = ImpactResolver(law) if self.resolve_impacts else PlainContact(law)
+
+    def step(self, current_time: float, step_size: float) -> None:
+        delta = self.x1 - self.x2 - self.gap
+        delta_dot = self.v1 - self.v2
+        c = self._contact
+        if self.resolve_impacts:
+            out = c.step(delta, delta_dot, step_size)
+            self.F = out.mean_force
+            self.impulse = out.impulse
+            self.substeps = out.substeps
+            self.delta = c.delta_end
+            self.delta_dot = c.delta_dot_end
+        else:
+            self.F = c.step(delta, delta_dot, step_size)
+            self.impulse = self.F * step_size
+            self.substeps = 1
+            self.delta = delta
+            self.delta_dot = delta_dot
+        self.CR_achieved = 0.0 if c.last_CR != c.last_CR else c.last_CR   # NaN before the first impact ends
+        self.E_last = c.last_E
+        self.in_contact = c.in_contact
+        self.F_max = c.F_max
+        self.E_dissipated = c.dissipated_energy()
+        self.impacts = c.impacts
+        self.v_impact = c.v_imp
+        self.delta_max = c.delta_max
+        self.contact_time = c.impact_time
