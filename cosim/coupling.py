@@ -120,3 +120,8 @@ def get_strategy(strategy: str | type[CouplingStrategy]) -> type[CouplingStrateg
         return STRATEGIES[strategy]
     except KeyError:
         raise ValueError(f"unknown coupling {strategy!r}; known: {', '.join(STRATEGIES)}") from None
+
+
+# The adaptive strategy with rollback lives in cosim/adaptive.py (it subclasses
+# CouplingStrategy) and registers itself in STRATEGIES when imported.
+from . import adaptive as _adaptive  # noqa: E402,F401

@@ -25,6 +25,7 @@ the slave's Python ``do_step`` dominating the rest.
 """
 from __future__ import annotations
 
+import atexit
 import itertools
 import shutil
 import weakref
@@ -63,6 +64,29 @@ _IDS = itertools.count(1)
 _LOGGER = fmi2CallbackLoggerTYPE(_dispatch_log)
 _ALLOCATE = fmi2CallbackAllocateMemoryTYPE(calloc)
 _FREE = fmi2CallbackFreeMemoryTYPE(free)
+
+
+# Extracted FMUs, one folder per FMU file version, shared by every FMU object of
+# the process and removed at exit.  pythonfmu imports each slave module once per
+# interpreter (sys.modules), and the module keeps pointing at the folder it was
+# first imported from: deleting that folder while the process lives would break
+# every later instance of the same FMU.
+_EXTRACTED: dict[tuple[str, int, int], Path] = {}
+
+
+def _extract_once(path: Path) -> Path:
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    folder = _EXTRACTED.get(key)
+    if folder is None or not folder.exists():
+        folder = _EXTRACTED[key] = Path(extract(str(path)))
+    return folder
+
+
+@atexit.register
+def _remove_extracted() -> None:
+    for folder in _EXTRACTED.values():
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 class FMUError(RuntimeError):
@@ -118,8 +142,10 @@ class VariableInfo:
 class FMU:
     """One FMU file: model description read and archive extracted once.
 
-    Create as many instances as needed with :meth:`instantiate`; the
-    extracted folder is removed by :meth:`close` (also a context manager).
+    Create as many instances as needed with :meth:`instantiate`.  The
+    extracted folder is shared by every ``FMU`` object of the same file in the
+    process and removed at interpreter exit (see ``_EXTRACTED``); :meth:`close`
+    only detaches this object.
     """
 
     def __init__(self, path: str | Path):
@@ -139,7 +165,7 @@ class FMU:
                          "String": str}[v.type](start)
             self.variables[v.name] = VariableInfo(v.name, v.type, v.causality, v.variability,
                                                   v.valueReference, start, v.unit, v.description)
-        self.unzip_dir: Path | None = Path(extract(str(self.path)))
+        self.unzip_dir: Path | None = _extract_once(self.path)
 
     def variable(self, name: str, causality: str | None = None) -> VariableInfo:
         """Look a variable up by name (and causality), with a helpful error."""
@@ -164,7 +190,7 @@ class FMU:
             sorted({p.split("[", 1)[0] for p in pool if p.split("[", 1)[0] == base})[:1] or \
             difflib.get_close_matches(base, sorted({p.split("[", 1)[0] for p in pool}), n=3)
         kind = f" {causality}" if causality else " variable"
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        hint = f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
         return f"{self.name}.fmu has no{kind} {name!r}{hint}"
 
     def instantiate(self, instance_name: str) -> "Instance":
@@ -173,9 +199,7 @@ class FMU:
         return Instance(self, instance_name)
 
     def close(self) -> None:
-        if self.unzip_dir is not None:
-            shutil.rmtree(self.unzip_dir, ignore_errors=True)
-            self.unzip_dir = None
+        self.unzip_dir = None
 
     def __enter__(self) -> "FMU":
         return self
@@ -280,10 +304,14 @@ class Instance:
         self.call("fmi2Terminate", self.component)
 
     def free(self) -> None:
+        """fmi2FreeInstance.  The shared library stays loaded on purpose: a pythonfmu
+        library runs inside this interpreter, and unloading it while Python objects
+        it created may still be alive can corrupt the heap (cf. FMPy issue #147,
+        PythonFMU issue #228); every later instance of the FMU reuses it anyway."""
         if not self._freed:
             self._freed = True
             self._slave.fmi2FreeInstance(self.component)
-            self._slave.freeLibrary()
+            _LIVE.pop(self._id, None)
 
     # -- FMU state (for rollback) ---------------------------------------------------------------
     def get_state(self):
@@ -352,6 +380,9 @@ class Instance:
     def integer_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> "IntegerPort":
         return IntegerPort(self, names, buffer)
 
+    def boolean_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> "BooleanPort":
+        return BooleanPort(self, names, buffer)
+
     def __repr__(self) -> str:
         return f"Instance({self.name!r} of {self.fmu.path.name})"
 
@@ -413,3 +444,9 @@ class IntegerPort(_Port):
     _ctype = c_int
     _dtype = np.int32
     _type = "Integer"
+
+
+class BooleanPort(IntegerPort):
+    """fmi2Boolean is a C int: 0 or 1 in an int32 buffer."""
+
+    _type = "Boolean"

@@ -22,7 +22,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .fmi import FMU, Instance, IntegerPort, RealPort
+from .fmi import FMU, BooleanPort, Instance, IntegerPort, RealPort
 from .scene import BUILDING, GROUND, POUNDING, InstanceSpec, Scene, _element
 
 
@@ -64,13 +64,15 @@ class Node:
     """One instance in the system: its ports and its input map.
 
     ``outputs.values`` is a view of ``System.y``; ``inputs`` are set from
-    ``A @ y`` by :meth:`pull`.  ``integers`` holds Integer outputs (impacts).
+    ``A @ y`` by :meth:`pull`.  ``integers`` and ``booleans`` hold the Integer
+    (impacts) and Boolean (in_contact) outputs, views of ``System.ints``.
     """
 
     spec: InstanceSpec
     instance: Instance
     outputs: RealPort
     integers: IntegerPort
+    booleans: BooleanPort
     inputs: RealPort
     A: np.ndarray
     kind: str
@@ -89,6 +91,7 @@ class Node:
         """Read the outputs (into the system's ``y``)."""
         self.outputs.get()
         self.integers.get()
+        self.booleans.get()
 
     def step(self, y: np.ndarray, t: float, h: float) -> None:
         """pull, fmi2DoStep, push."""
@@ -102,7 +105,7 @@ class System:
 
     Attributes: ``nodes`` (Gauss-Seidel order: ground, contacts, buildings),
     ``ground`` / ``contacts`` / ``buildings`` (lists of nodes), ``y`` (every
-    Real output), ``ints`` (every Integer output), ``columns`` (names
+    Real output), ``ints`` (every Integer and Boolean output), ``columns`` (names
     ``instance.variable`` of ``y`` then ``ints``).
     """
 
@@ -132,15 +135,16 @@ class System:
         specs = scene.instances()
         out_names = {s.name: self._output_names(s, self.catalog[s.fmu], "Real") for s in specs}
         int_names = {s.name: self._output_names(s, self.catalog[s.fmu], "Integer") for s in specs}
+        bool_names = {s.name: self._output_names(s, self.catalog[s.fmu], "Boolean") for s in specs}
         offsets, n_y = {}, 0
         for s in specs:
             offsets[s.name] = n_y
             n_y += len(out_names[s.name])
-        n_i = sum(len(int_names[s.name]) for s in specs)
+        n_i = sum(len(int_names[s.name]) + len(bool_names[s.name]) for s in specs)
         self.y = np.zeros(n_y)
         self.ints = np.zeros(n_i, dtype=np.int32)
         self.columns = [f"{s.name}.{v}" for s in specs for v in out_names[s.name]] + \
-                       [f"{s.name}.{v}" for s in specs for v in int_names[s.name]]
+                       [f"{s.name}.{v}" for s in specs for v in int_names[s.name] + bool_names[s.name]]
         index = {c: i for i, c in enumerate(self.columns[:n_y])}
 
         # inputs each instance receives, in a fixed order, and the map A from y
@@ -162,11 +166,14 @@ class System:
             ni = len(int_names[s.name])
             integers = inst.integer_port(int_names[s.name], self.ints[i_offset:i_offset + ni])
             i_offset += ni
+            nb = len(bool_names[s.name])
+            booleans = inst.boolean_port(bool_names[s.name], self.ints[i_offset:i_offset + nb])
+            i_offset += nb
             for name in in_names[s.name]:
                 inst.variable(name, "input")
             inputs = inst.real_port(in_names[s.name])
             kind = {GROUND: "ground", POUNDING: "contact", BUILDING: "building"}[s.fmu]
-            self.nodes.append(Node(s, inst, outputs, integers, inputs, matrices[s.name], kind))
+            self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind))
         self.ground = [n for n in self.nodes if n.kind == "ground"]
         self.contacts = [n for n in self.nodes if n.kind == "contact"]
         self.buildings = [n for n in self.nodes if n.kind == "building"]
@@ -260,6 +267,14 @@ class SimulationResult:
     do_steps: dict[str, int]
     wall_time_s: float
     instances: list[str] = field(default_factory=list)
+    stats: dict[str, Any] = field(default_factory=dict)   # strategy-specific counters (adaptive)
+
+    @property
+    def energy_residual_J(self) -> float:
+        """Energy balance residual at the end (J), see :mod:`cosim.results`."""
+        from .results import energy_history
+
+        return float(energy_history(self)["residual"][-1])
 
     def __getitem__(self, column: str) -> np.ndarray:
         try:
@@ -295,14 +310,18 @@ class Recorder:
 
 def simulate(system: System, strategy: str | type | None = None, stop_time: float | None = None,
              step: float | None = None, progress: bool | None = None,
-             callback: Callable[[float], None] | None = None, **options: Any) -> SimulationResult:
+             callback: Callable[[float], None] | None = None, check_stability: bool = True,
+             **options: Any) -> SimulationResult:
     """Initialise ``system`` and run it from t0 = 0 to ``stop_time`` with a coupling strategy.
 
     ``strategy``: a name from :data:`cosim.coupling.STRATEGIES` or a
     :class:`~cosim.coupling.CouplingStrategy` subclass (default: the scene's
     ``coupling``); ``step``: communication step (s, default: the scene's);
     ``progress``: tqdm bar (None = shown if the run lasts over 2 s).
-    ``options`` go to the strategy's constructor.
+    ``options`` go to the strategy's constructor.  ``check_stability``: after every
+    step, :class:`cosim.adaptive.StabilityGuard` raises
+    :class:`cosim.adaptive.InstabilityError` (saying what to change) when the run has
+    produced non-finite values, a penetration beyond physical sense or created energy.
     """
     from .coupling import get_strategy
 
@@ -317,6 +336,11 @@ def simulate(system: System, strategy: str | type | None = None, stop_time: floa
     wall = time.perf_counter()
     system.initialize(0.0, stop_time)
     solver = cls(system, 0.0, stop_time, step, **options)
+    guard = None
+    if check_stability:
+        from .adaptive import StabilityGuard
+
+        guard = StabilityGuard(system)
     recorder = Recorder(system, int(np.ceil(stop_time / step)) + 2)
     recorder.record(0.0)
     bar = None
@@ -330,6 +354,8 @@ def simulate(system: System, strategy: str | type | None = None, stop_time: floa
     try:
         while solver.status == "running":
             solver.step()
+            if guard is not None:
+                guard.check(solver.t, getattr(solver, "h_last", solver.h))
             recorder.record(solver.t)
             if callback is not None:
                 callback(solver.t)
@@ -346,4 +372,4 @@ def simulate(system: System, strategy: str | type | None = None, stop_time: floa
         values=recorder.values[:k].copy(), communication_steps=solver.communication_steps,
         rollbacks=solver.rollbacks, fmu_calls=system.fmu_calls() - calls_before,
         do_steps={n: v - steps_before.get(n, 0) for n, v in system.do_steps().items()},
-        wall_time_s=wall, instances=[n.name for n in system.nodes])
+        wall_time_s=wall, instances=[n.name for n in system.nodes], stats=dict(getattr(solver, "stats", {})))

@@ -236,12 +236,12 @@ def plot_contact_force(result: SimulationResult, path: Path, plt) -> Path:
     fig, ax = plt.subplots(figsize=(10, 4))
     for c in result.scene.contacts:
         line, = ax.plot(result.time, result[f"{c.name}.F"] / 1e3, lw=0.9, label=f"{c.name} mean F over step")
-        if result.has(f"{c.name}.F_max"):
-            times = impact_times(result, c.name)
-            if times.size:
-                k = np.searchsorted(result.time, times)
-                ax.plot(times, result[f"{c.name}.F_max"][k] / 1e3, "^", color=line.get_color(), ms=4,
-                        label=f"{c.name} peak force")
+        if result.has(f"{c.name}.F_max"):  # the FMU's running maximum of the instantaneous force
+            ax.plot(result.time, result[f"{c.name}.F_max"] / 1e3, "--", lw=0.8, color=line.get_color(),
+                    label=f"{c.name} peak force so far")
+        times = impact_times(result, c.name)
+        if times.size:
+            ax.plot(times, np.zeros_like(times), "|", color=line.get_color(), ms=10)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("contact force [kN]")
     ax.set_title(f"{result.scene.name}: contact force")
@@ -266,9 +266,7 @@ def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
             continue
         delta = result[f"{c.name}.delta"]
         force = result[f"{c.name}.F"]
-        on = (delta > 0) | (force > 0)
-        # keep one sample either side so each loop starts and ends at zero force
-        on = on | np.roll(on, 1) | np.roll(on, -1)
+        on = (delta > 0) | (force > 0)  # NaN elsewhere: one polyline per contact episode
         d = np.where(on, delta, np.nan)
         ax.plot(d * 1e3, np.where(on, force, np.nan) / 1e3, ".-", lw=0.8, ms=3, label=c.name)
     ax.set_xlabel("penetration delta [mm]")

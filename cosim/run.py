@@ -32,6 +32,7 @@ if __package__ in (None, ""):  # run as a script: make the package importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.coupling import STRATEGIES  # noqa: E402
+from cosim.adaptive import InstabilityError  # noqa: E402
 from cosim.fmi import FMUError  # noqa: E402
 from cosim.master import Catalog, SimulationResult, System, simulate  # noqa: E402
 from cosim.results import format_summary, summarize, write_results  # noqa: E402
@@ -109,6 +110,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     parser.add_argument("--list", action="store_true", help="list the bundled scenes and exit")
+    parser.add_argument("--accuracy", action="store_true",
+                        help="accuracy/time study: every coupling strategy over a range of steps against the "
+                             "reference and OpenSees; writes accuracy.csv/.md/.png into --out")
+    parser.add_argument("--export-ssp", type=Path, metavar="FILE.ssp",
+                        help="write the scene as an SSP 1.0 package (FMUs included) and exit without running")
     args = parser.parse_args(argv)
     if args.list:
         for name in bundled_scenes():
@@ -118,6 +124,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                 description = f"(invalid: {exc})"
             print(f"{name:<16} {description}")
         return 0
+    if args.export_ssp is not None:
+        from cosim.ssp import export_cli
+
+        return export_cli(args.scene, args.export_ssp, args.overrides, coupling=args.coupling, step=args.step,
+                          stop_time=args.stop_time, fmu_dir=args.fmu_dir)
+    if args.accuracy:
+        from cosim.accuracy import main as accuracy_main
+
+        try:
+            return accuracy_main(args.scene, args.out, args.overrides, fmu_dir=args.fmu_dir,
+                                 stop_time=args.stop_time)
+        except SceneError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     try:
         run = run_scene(args.scene, args.overrides, out=args.out, coupling=args.coupling, step=args.step,
                         stop_time=args.stop_time, fmu_dir=args.fmu_dir, plots=not args.no_plots,
@@ -132,6 +152,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except InstabilityError as exc:  # the run went unphysical: nothing was written
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     print(format_summary(run.summary))
     print(f"results: {run.folder}")
     return 0

@@ -69,7 +69,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
 
 TOP_LEVEL = ("name", "description", "stop_time", "step", "coupling", "ground", "buildings", "pounding")
-COUPLINGS = ("gauss-seidel", "jacobi")
+COUPLINGS = ("gauss-seidel", "jacobi", "adaptive")
 POUNDING_MASTER_KEYS = ("floors", "allow_initial_overlap")
 # Array parameters of building.fmu (contract in docs/architecture.md); used to
 # expand scalars when no model description is at hand.

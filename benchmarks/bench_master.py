@@ -1,0 +1,66 @@
+"""Wall time of the master on the bundled scenes (prints figures; no assertions).
+
+    python benchmarks/bench_master.py [--fmu-dir DIR] [--repeat 3]
+
+For each scene: the first and the best of ``repeat`` runs of the simulation loop (FMUs
+loaded and instantiated once, ``System.reset`` between runs, nothing written), the cost
+per communication step and the FMI calls.  ``--profile`` also profiles one run of the
+default scene and prints the share of the time spent in ``cosim/`` itself (cProfile
+inflates Python-heavy code, so this over-estimates the master's share).
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cosim.master import Catalog, System, simulate  # noqa: E402
+from cosim.scene import load_scene  # noqa: E402
+
+SCENES = ("default", "single_impact", "free_vibration", "one_building", "kasai_maison")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fmu-dir", type=Path)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--profile", action="store_true", help="profile the default scene")
+    args = parser.parse_args(argv)
+    if args.fmu_dir is None:
+        from build_fmu import DEFAULT_OUT, build_all
+        build_all(DEFAULT_OUT)
+        args.fmu_dir = DEFAULT_OUT
+    print(f"{'scene':<16}{'steps':>7}{'instances':>10}{'first run s':>13}{'best s':>9}{'us/step':>9}{'FMI calls':>11}")
+    with Catalog(args.fmu_dir) as catalog:
+        for name in SCENES:
+            scene = load_scene(name, catalog=catalog)
+            with System(scene, catalog) as system:
+                times = []
+                for _ in range(args.repeat):
+                    result = simulate(system, progress=False)
+                    times.append(result.wall_time_s)
+                best = min(times)
+                n = result.communication_steps
+                print(f"{name:<16}{n:>7}{len(system.nodes):>10}{times[0]:>13.3f}{best:>9.3f}"
+                      f"{1e6 * best / n:>9.1f}{result.fmu_calls:>11}")
+                if args.profile and name == "default":
+                    profiler = cProfile.Profile()
+                    profiler.enable()
+                    simulate(system, progress=False)
+                    profiler.disable()
+                    stats = pstats.Stats(profiler)
+                    total = stats.total_tt
+                    master = sum(v[2] for k, v in stats.stats.items() if "/cosim/" in k[0])
+                    print(f"  profile of default: {total:.3f} s in total, {master:.3f} s "
+                          f"({100 * master / total:.0f} %) in cosim/ itself (own time)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
