@@ -107,7 +107,7 @@ class Variable:
             return None
         if self.type in ("Real", "Integer"):
             v = float(value)
-            unit = f" {self.unit}" if self.unit else ""
+            unit = f" {self.unit}" if self.unit not in ("", "1") else ""
             if not math.isfinite(v):
                 return f"{self.name} = {value!r}{unit} is not finite (allowed: {self.allowed_range()})"
             bad_low = self.low is not None and (v <= self.low if self.low_open else v < self.low)
