@@ -30,9 +30,13 @@ from the buildings at t, buildings), of a length chosen per step:
   the default scene).  A closure inside an unsaved step is accepted and counted in
   ``stats["missed_events"]``.
 
-The scheme inside a step is Gauss-Seidel with the contact FMU's force held over the step
-(first order in ``h``); with ``resolve_impacts = false`` it converges to the monolithic
-solution (:mod:`cosim.reference`).  Its energy bookkeeping is exact: the contact FMU's work
+The scheme inside a step is Gauss-Seidel.  With ``resolve_impacts = true`` (the package's
+default) the contact FMU integrates each impact inside its step, following the buildings'
+motion, and hands over the impulse as a mean force: the master's steps then only need to
+land near the onsets and follow the buildings through the contact (``contact_fraction``
+1/2).  With ``resolve_impacts = false`` the contact FMU's force is held over the step (first
+order in ``h``, ``contact_fraction`` 1/64); it converges to the monolithic solution
+(:mod:`cosim.reference`) and its energy bookkeeping is exact: the contact FMU's work
 ``F (delta_new - delta_old)`` is what the buildings receive.
 
 :class:`StabilityGuard` runs after every accepted step of every strategy (hooked into
@@ -88,11 +92,51 @@ class _Level:
     i_F: int                    # contact output F (N)
     i_vimp: int                 # contact output v_impact (m/s)
     i_Ediss: int                # contact output E_dissipated (J)
+    CR: float = 0.65            # requested restitution
+
+    def in_contact_scale(self, delta: float, delta_dot: float, v_imp: float, fraction: float) -> float:
+        """Longest step (s) the explicit force-law coupling can take in contact now.
+
+        ``fraction`` times the shortest of: the impact time scale (closing step:
+        :meth:`time_scale`, in contact: ``L(v) / v``); the spring's
+        ``sqrt(m / k_t)``, ``k_t = n k delta^(n-1)``; and ``8 m / c`` for the dashpot ``c =
+        dF/d(delta_dot)`` (an explicit relaxation needs ``h c / m`` well below 1: CR -> 0 makes
+        ``c`` huge).  The dissipated energy's error is a fixed fraction of the impact's kinetic
+        energy per ``h / T``, so relative to what the impact dissipates it grows like
+        ``1 / (1 - CR^2)``: the step shrinks by ``(1 - CR^2) / (1 - 0.65^2)`` (the default was
+        set at CR = 0.65, concrete), at most 16 times.
+        """
+        law = self.law
+        v = max(v_imp, abs(delta_dot), _V_FLOOR)
+        if delta <= 0.0:                      # the step that closes the gap
+            scale = self.time_scale(v)
+        else:                                 # in contact: the spring's scale and the local ones
+            scale = law.length_scale(v) / v
+            k_t = law.n * law.k * delta ** (law.n - 1.0)
+            if k_t > 0.0:
+                scale = min(scale, math.sqrt(law.m / k_t))
+            c = law.force_and_derivatives(delta, delta_dot, v)[2]
+            if c > 0.0 and math.isfinite(c):
+                scale = min(scale, 8.0 * law.m / c)
+        energy = min(1.0, max(1.0 / 16.0, (1.0 - self.CR * self.CR) / (1.0 - 0.65 * 0.65)))
+        return fraction * energy * scale
 
     def time_scale(self, v: float) -> float:
-        """``T = L / v`` (s): penetration scale over approach speed of an impact at ``v`` (m/s)."""
+        """Impact time scale (s) at approach speed ``v`` (m/s): ``d* / v``.
+
+        ``d*`` is the penetration scale ``L = (m v^2 / k)^(1/(n+1))``, or the distance the
+        dashpot alone stops the bodies in, ``m v / c(d*)``, if shorter (a few fixed-point
+        passes; CR -> 0 makes the dashpot stop the impact long before the spring would).
+        """
         v = max(abs(v), _V_FLOOR)
-        return self.law.length_scale(v) / v
+        law = self.law
+        d = law.length_scale(v)
+        for _ in range(4):
+            c = law.force_and_derivatives(d, v, v)[2]
+            if not (c > 0.0 and math.isfinite(c)) or law.m * v / c >= d:
+                break
+            d = law.m * v / c
+        return d / v
 
     def kinematics(self, y: np.ndarray) -> tuple[float, float, float]:
         """Host ``delta`` (m), ``delta_dot`` (m/s, > 0 approaching), ``delta_ddot`` (m/s^2)."""
@@ -129,7 +173,7 @@ def contact_levels(system: System) -> list[_Level]:
         levels.append(_Level(node.name, law, float(p["gap"]), bool(p["resolve_impacts"]),
                              source["x1"], source["v1"], accel["1"], source["x2"], source["v2"], accel["2"],
                              index[out + "delta"], index[out + "F"], index[out + "v_impact"],
-                             index[out + "E_dissipated"]))
+                             index[out + "E_dissipated"], float(p["CR"])))
     return levels
 
 
@@ -183,7 +227,10 @@ class StabilityGuard:
         self._i_input = [index[f"{b}.E_input"] for b in names]
         self._i_external = [index[f"{b}.E_external"] for b in names]
         self._i_mech = [index[f"{b}.{v}"] for b in names for v in ("E_kinetic", "E_strain")]
-        self.E_initial = sum(system.y.item(i) for i in self._i_mech)
+        # energy stored at t0 in contacts that start closed (allow_initial_overlap): it is in
+        # the system, and a contact that releases it reports it as negative dissipation
+        self._stored0 = [lv.law.elastic_energy(lv.kinematics(system.y)[0]) for lv in self.levels]
+        self.E_initial = sum(system.y.item(i) for i in self._i_mech) + sum(self._stored0)
         self.E_avail = self.E_initial
         self._limits = [0.0] * len(self.levels)
         self._update_limits()
@@ -213,20 +260,20 @@ class StabilityGuard:
             self.E_avail = E_in
             self._update_limits()
         tol = self.energy_tol * self.E_avail + 1e-9
-        for lv, limit in zip(self.levels, self._limits):
+        for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
             delta = item(lv.i_delta)
             if delta > limit:
                 return InstabilityError(
                     f"{lv.name}: t = {t:.6g} s: penetration {delta:.3g} m is beyond physical sense "
                     f"(all {self.E_avail:.3g} J in the system would compress the contact only "
                     f"{limit / self.penetration_factor:.3g} m): {self._advice(lv, h)}", t, lv.name, "penetration")
-            if item(lv.i_Ediss) < -tol:
+            if item(lv.i_Ediss) < -tol - stored0:
                 return InstabilityError(
-                    f"{lv.name}: t = {t:.6g} s: the contact created {-item(lv.i_Ediss):.3g} J "
+                    f"{lv.name}: t = {t:.6g} s: the contact created {-item(lv.i_Ediss) - stored0:.3g} J "
                     f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
                     t, lv.name, "energy")
         if self.levels:
-            work = 0.0
+            work = -sum(self._stored0)
             for i in self._i_external:
                 work += item(i)
             if work > tol:
@@ -266,15 +313,31 @@ class StabilityGuard:
 
 
 # -- the strategy ----------------------------------------------------------------------------------
+#: contact step / impact time scale, by contact mode (chosen from docs/accuracy.md)
+CONTACT_FRACTION_RESOLVED = 1.0 / 2.0
+CONTACT_FRACTION_PLAIN = 1.0 / 64.0
+
+
+def default_contact_fraction(levels) -> float:
+    """1/2 if every contact resolves its impacts, else 1/64 (see :class:`Adaptive`)."""
+    if levels and all(lv.resolved for lv in levels):
+        return CONTACT_FRACTION_RESOLVED
+    return CONTACT_FRACTION_PLAIN
+
+
 class Adaptive(CouplingStrategy):
     """Gauss-Seidel with dyadic adaptive communication steps and rollback (module docstring).
 
     Parameters (besides the base class's; ``step`` is the largest step ``h_max``, s)
     ----------
-    contact_fraction : float
+    contact_fraction : float, optional
         Step in contact (and for the step that closes a gap) as a fraction of the impact's
-        time scale ``T = L / v`` (default 1/32: peak force and dissipated energy of the
-        default scene within 1 % of the reference, docs/accuracy.md).
+        time scale ``T = L / v`` (:meth:`_Level.in_contact_scale`).  Default
+        (:func:`default_contact_fraction`): 1/2 when every contact FMU resolves its impacts
+        (``resolve_impacts = true``: the FMU integrates the impact, the master only follows
+        the buildings through it), 1/64 with the plain force law (first order: peak force
+        and dissipated energy of the default scene within 1 % and 2 % of the reference).
+        Both from the accuracy study, docs/accuracy.md.
     max_halvings : int
         Smallest step ``h_max / 2**max_halvings`` (default 16).
     accel_safety : float
@@ -289,9 +352,12 @@ class Adaptive(CouplingStrategy):
     name = "adaptive"
 
     def __init__(self, system: System, t0: float, t_bound: float, step: float, *,
-                 contact_fraction: float = 1.0 / 32.0, max_halvings: int = 16, accel_safety: float = 2.0,
+                 contact_fraction: float | None = None, max_halvings: int = 16, accel_safety: float = 2.0,
                  risk_factor: float = 2.0):
         super().__init__(system, t0, t_bound, step)
+        self.levels = contact_levels(system)
+        if contact_fraction is None:
+            contact_fraction = default_contact_fraction(self.levels)
         if not (0.0 < contact_fraction <= 1.0):
             raise ValueError(f"contact_fraction = {contact_fraction!r} must be in (0, 1]")
         if not (isinstance(max_halvings, int) and 0 <= max_halvings <= 40):
@@ -306,7 +372,6 @@ class Adaptive(CouplingStrategy):
         self._end_tick = max(1, math.ceil((self.t_bound - self.t0) / self.h_min - 1e-9))
         self._level = 0                                    # level of the last step (0: h_max)
         self._order = system.ground + system.contacts + system.buildings
-        self.levels = contact_levels(system)
         self._i_pga = None
         if system.ground:
             self._i_pga = system.columns.index(f"{system.ground[0].name}.pga")
@@ -337,14 +402,13 @@ class Adaptive(CouplingStrategy):
         for lv in self.levels:
             d, dd, ddd = lv.kinematics(y)
             if d > 0.0 or y.item(lv.i_F) > 0.0 or y.item(lv.i_delta) > 0.0:     # in contact
-                v = max(y.item(lv.i_vimp), abs(dd))
-                h_target = min(h_target, self.contact_fraction * lv.time_scale(v))
+                h_target = min(h_target, lv.in_contact_scale(d, dd, y.item(lv.i_vimp), self.contact_fraction))
                 continue
             A = self.accel_safety * abs(ddd) + a_extra
             s = closure_time(d, dd, A)
             if s < math.inf:
                 v_closing = max(dd, 0.0) + A * s                    # fastest possible approach at closure
-                h_contact = self.contact_fraction * lv.time_scale(v_closing)
+                h_contact = lv.in_contact_scale(0.0, v_closing, v_closing, self.contact_fraction)
                 h_target = min(h_target, max(s, h_contact))
                 closures.append(s)
         return h_target, closures
@@ -355,10 +419,11 @@ class Adaptive(CouplingStrategy):
             raise RuntimeError("the strategy has already finished")
         system = self.system
         cap = math.inf
+        finest = 0                                               # a retry must be finer than the rejected step
         saved = None
         while True:
             h_target, closures = self._plan()
-            level = self._dyadic_level(min(h_target, cap))
+            level = max(self._dyadic_level(min(h_target, cap)), finest)
             level = max(level, self._level - 1)                  # grow by at most a factor 2
             level = self._aligned(level)
             n_ticks = 1 << (self.max_halvings - level)
@@ -378,6 +443,7 @@ class Adaptive(CouplingStrategy):
                 self._restore(saved)
                 self.rollbacks += 1
                 cap = retry
+                finest = min(level + 1, self.max_halvings)
                 continue
             self.stats["missed_events"] += 1
             break
@@ -409,13 +475,14 @@ class Adaptive(CouplingStrategy):
             d1, dd1, _ = lv.kinematics(y)
             if d1 <= 0.0:
                 continue
-            h_contact = self.contact_fraction * lv.time_scale(max(dd0, dd1))
+            v = max(dd0, dd1)
+            h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
             if h <= h_contact * (1.0 + 1e-9) or h <= self.h_min * (1.0 + 1e-9):
                 continue
             s = h * (-d0) / (d1 - d0)                          # crossing, linear in the step
+            if s >= h * (1.0 - 1e-9):                           # landed on the onset (round-off)
+                continue
             candidate = max(s, h_contact)
-            if candidate >= h:                                  # make progress: at least halve
-                candidate = 0.5 * h
             retry = candidate if retry is None else min(retry, candidate)
         return retry
 

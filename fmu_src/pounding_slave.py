@@ -6,7 +6,10 @@ The output force ``F`` (>= 0) pushes body 1 towards -x and body 2 towards +x.
 With ``resolve_impacts = true`` (default) every impact is located and integrated inside the
 step at its own time scale (:class:`fmu_src.impact.ImpactResolver`) and ``F`` is the mean
 force of the step (``F * h`` = impulse), so the momentum and energy handed to the bodies do
-not depend on where the communication points fall.  With ``false`` the force law is
+not depend on where the communication points fall.  The resolver follows the host: the
+structures' own contribution to the relative motion (storey springs, dampers) is measured
+from the inputs of consecutive steps, predicted over the next step and corrected, so that
+contacts lasting several steps stay on the host's trajectory; for free masses it is zero.  With ``false`` the force law is
 evaluated on the current inputs only (:class:`fmu_src.impact.PlainContact`).
 See docs/contact_models.md for the models and the in-step rules.
 """

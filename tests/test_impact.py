@@ -203,25 +203,34 @@ def test_missed_onset_starts_the_impact_at_once():
 
 
 def test_reapproach_within_residual_overlap_is_a_new_impact():
-    # After impact 1 the host overlaps by the offset; reversing the relative velocity there
-    # (an external force would) must give a second impact when the *true* gap closes.
+    # After impact 1 the host overlaps by the offset; an external push (a constant relative
+    # acceleration, as a structure would exert, learnt from the host's motion) turns the bodies
+    # round inside that residual overlap: the next impact must start when the *true* gap closes,
+    # not as soon as the host approaches while overlapping.
     law = law_for("crvk", 2.75e9, 1.5, 1e5, 1e5, 0.5)
     t_c = simulate_impact(law, 1.0).contact_duration
+    h, a = 2.0 * t_c, 4.0                          # s, m/s^2
     r = ImpactResolver(law)
-    h = 2.0 * t_c
-    r.step(-1e-9, 1.0, h)                          # impact 1 inside the step
-    # host after the step with the mean force, then its relative velocity flipped
-    J = law.m * 1.5  # impulse = m (1 + CR) v
-    d_host = -1e-9 + 1.0 * h - 0.5 * J / law.m * h * h
-    assert d_host > 0.0
-    r.step(d_host, 0.2, h)                         # approaching again, still "overlapping"
-    assert r.offset > 0.0
-    # the true gap is CR v (h - t_c) = 0.5 t_c m: it closes after 2.5 t_c at 0.2 m/s, i.e.
-    # in the second step after the reversal, not in the first
-    assert r.impacts == 1
-    r.step(d_host + 0.2 * h, 0.2, h)
-    assert r.impacts == 2
-    assert r.v_imp == pytest.approx(0.2)
+    d, v = -1e-9 - 1.0 * h - 0.5 * a * h * h, 1.0  # impact 1 at the start of the second step
+    hosts, forces, impacts, offsets = [], [], [], []
+    for _ in range(6):
+        out = r.step(d, v, h)
+        hosts.append((d, v))
+        forces.append(out.mean_force)
+        impacts.append(r.impacts)
+        offsets.append(r.offset)
+        acc = a - out.mean_force / law.m
+        d, v = d + v * h + 0.5 * acc * h * h, v + acc * h
+    assert impacts[:2] == [0, 1] and forces[1] > 0.0
+    # steps 2-4: the host overlaps, turns round (approaching at step 4) and gets no force
+    assert all(hosts[k][0] > 0.0 for k in (2, 3, 4)) and hosts[3][1] < 0.0 < hosts[4][1]
+    assert forces[2:5] == [0.0, 0.0, 0.0] and impacts[2:5] == [1, 1, 1]
+    assert offsets[2] > 0.0 and offsets[4] == pytest.approx(offsets[2], rel=1e-12)   # frozen
+    # the true gap closes in step 5, at the speed of the internal flight from step 2 on:
+    # gap d0 = d_host - offset closed under the push, v^2 = v0^2 - 2 a d0
+    assert impacts[5] == 2
+    d0, v0 = hosts[2][0] - offsets[2], hosts[2][1]
+    assert r.v_imp == pytest.approx(math.sqrt(v0 * v0 - 2.0 * a * d0), rel=1e-9)
 
 
 def test_plain_contact_energy_is_work_minus_stored():

@@ -1,0 +1,90 @@
+"""The accuracy/time study (cosim/accuracy.py), reduced: the default scene's first 4.2 s
+(three impacts), one or two settings per strategy, no OpenSees (its own tests cover it)."""
+from __future__ import annotations
+
+import csv
+import math
+
+import pytest
+
+from cosim.accuracy import REDUCED_FAMILIES, Row, markdown, run_study, score, write_study
+from cosim.master import Catalog
+
+
+@pytest.fixture(scope="module")
+def study(fmu_dir):
+    with Catalog(fmu_dir) as catalog:
+        return run_study("default", catalog=catalog, families=REDUCED_FAMILIES, opensees_dts=(),
+                         stop_time=4.2, reference_rtol=1e-9, log=None)
+
+
+def rows(study, method):
+    return [r for r in study.rows if r.method == method]
+
+
+def test_every_strategy_is_measured(study):
+    assert study.reference["impacts"] == 3
+    assert {r.method for r in study.rows} == {"jacobi", "gauss-seidel", "gauss-seidel-resolved", "adaptive",
+                                              "adaptive-resolved"}
+    for r in study.rows:
+        assert r.status == "ok"
+        assert r.wall_time_s > 0 and r.communication_steps > 0 and r.fmu_calls > r.communication_steps
+        assert all(math.isfinite(x) for x in (r.err_peak_force, r.err_dissipated_energy, r.err_peak_displacement))
+
+
+def test_adaptive_converges_and_meets_the_criteria(study):
+    coarse, fine = sorted(rows(study, "adaptive"), key=lambda r: -r.value)
+    # first order in the contact step: 4 times finer, about 4 times smaller errors (at least 2)
+    assert fine.err_peak_force < coarse.err_peak_force / 2
+    assert fine.err_dissipated_energy < coarse.err_dissipated_energy / 2
+    assert fine.meets_criteria
+    assert fine.impacts == study.reference["impacts"]
+    # onsets within a millisecond (the contact step is ~0.3 ms)
+    assert fine.err_impact_time_s < 1e-3
+    # plain-law Gauss-Seidel and the adaptive scheme close the energy balance to round-off
+    assert abs(fine.energy_residual_relative) < 1e-8
+
+
+def test_default_settings_meet_the_criteria(study):
+    """The package's default (adaptive, 0.01 s, resolved impacts) meets the criteria in about
+    as many steps as a fixed 0.01 s step (it refines only around the onsets)."""
+    (default,) = rows(study, "adaptive-resolved")
+    assert default.meets_criteria
+    assert default.communication_steps < 1.2 * study.stop_time / 0.01
+
+
+def test_adaptive_beats_fixed_steps(study):
+    """Plain-law Gauss-Seidel at a fixed 1 ms step takes more steps than the adaptive scheme
+    at 1/64 and is less accurate (it steps finely where nothing happens, coarsely in contact)."""
+    (fixed,) = rows(study, "gauss-seidel")
+    fine = min(rows(study, "adaptive"), key=lambda r: r.value)
+    assert fixed.communication_steps > fine.communication_steps
+    assert fixed.err_peak_force > fine.err_peak_force
+    assert fixed.err_dissipated_energy > fine.err_dissipated_energy
+    (jacobi,) = rows(study, "jacobi")
+    assert jacobi.err_peak_force > fixed.err_peak_force      # one step of delay on top
+
+
+def test_score_applies_the_criteria():
+    ref = dict(peak_force_N=100.0, impacts=2, dissipated_energy_J=10.0, peak_displacements_m=[1.0, 2.0],
+               impact_times_s=[1.0, 2.0])
+    ok = score(Row("x", "step", 1.0), ref, 100.9, 2, 10.19, [1.004, 2.0], [1.001, 2.0])
+    assert ok.meets_criteria and ok.err_impact_time_s == pytest.approx(0.001)
+    assert ok.error == pytest.approx(0.019)
+    assert not score(Row("x", "step", 1.0), ref, 101.1, 2, 10.0, [1.0, 2.0], [1.0, 2.0]).meets_criteria
+    assert not score(Row("x", "step", 1.0), ref, 100.0, 3, 10.0, [1.0, 2.0], [1.0, 1.5, 2.0]).meets_criteria
+    miss = score(Row("x", "step", 1.0), ref, 100.0, 3, 10.0, [1.0, 2.0], [1.0, 1.5, 2.0])
+    assert math.isnan(miss.err_impact_time_s)
+    assert not score(Row("x", "step", 1.0), ref, 100.0, 2, 10.0, [1.006, 2.0], [1.0, 2.0]).meets_criteria
+
+
+def test_written_files(study, tmp_path):
+    folder = write_study(study, tmp_path / "acc")
+    assert {p.name for p in folder.iterdir()} == {"accuracy.csv", "accuracy.md", "accuracy.png"}
+    with open(folder / "accuracy.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert len(table) == len(study.rows)
+    assert float(table[0]["wall_time_s"]) == pytest.approx(study.rows[0].wall_time_s, rel=1e-5)
+    text = markdown(study)
+    assert "| adaptive | contact_fraction = 1/64 |" in text
+    assert (folder / "accuracy.png").stat().st_size > 10_000

@@ -1,0 +1,189 @@
+"""The adaptive coupling with rollback (cosim/adaptive.py) and the stability guard."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.adaptive import Adaptive, InstabilityError, StabilityGuard, closure_time
+from cosim.coupling import STRATEGIES, get_strategy
+from cosim.master import Catalog, System, simulate
+from cosim.reference import reference_for_scene
+from cosim.results import energy_history
+from cosim.scene import load_scene
+
+PLAIN_ADAPTIVE = ['coupling="adaptive"', "pounding.resolve_impacts=false"]
+
+
+@pytest.fixture(scope="module")
+def catalog(fmu_dir):
+    with Catalog(fmu_dir) as cat:
+        yield cat
+
+
+def run(catalog, scene, overrides=(), **options):
+    loaded = load_scene(scene, list(overrides), catalog)
+    with System(loaded, catalog) as system:
+        return simulate(system, progress=False, **options)
+
+
+# -- the closure prediction ---------------------------------------------------------------------
+@pytest.mark.parametrize("delta, rate, accel", [(-0.03, 0.5, 0.0), (-0.03, 0.5, 4.0), (-0.03, -0.2, 4.0),
+                                                 (-1e-9, 1e-3, 1e3), (-0.02, 0.0, 2.0)])
+def test_closure_time_solves_the_bound(delta, rate, accel):
+    """s* is the positive root of delta + rate s + accel s^2 / 2 = 0 (the earliest closure)."""
+    s = closure_time(delta, rate, accel)
+    assert s > 0.0
+    assert delta + rate * s + 0.5 * accel * s * s == pytest.approx(0.0, abs=1e-12 * max(1.0, abs(delta)))
+    # and no earlier closure: the bound is negative just before
+    assert delta + rate * 0.999 * s + 0.5 * accel * (0.999 * s) ** 2 < 0.0
+
+
+def test_closure_time_edge_cases():
+    assert closure_time(0.001, -1.0, 0.0) == 0.0              # already closed
+    assert closure_time(-0.01, -1.0, 0.0) == math.inf         # receding, no acceleration bound
+    assert closure_time(-0.01, 2.0, 0.0) == pytest.approx(0.005)
+
+
+def test_registered():
+    assert get_strategy("adaptive") is Adaptive
+    assert STRATEGIES["adaptive"] is Adaptive
+    assert load_scene("default", ['coupling="adaptive"']).coupling == "adaptive"
+
+
+# -- steps, counters, energy --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def short_default(catalog):
+    """The default scene for 4.2 s (three impacts, the third the strongest), adaptive plain law."""
+    return run(catalog, "default", PLAIN_ADAPTIVE + ["stop_time=4.2"])
+
+
+def test_steps_are_aligned_dyadic_fractions(short_default):
+    result = short_default
+    h = np.diff(result.time)
+    h_max = result.scene.step
+    levels = np.log2(h_max / h[:-1])   # the last step may be clipped to stop_time
+    np.testing.assert_allclose(levels, np.round(levels), atol=1e-9)
+    # each step starts on a multiple of its own length (time is a count of the finest step)
+    ratio = result.time[:-2] / h[:-1]
+    np.testing.assert_allclose(ratio, np.round(ratio), atol=1e-6)
+    assert h.max() == pytest.approx(h_max)
+    assert h.min() < h_max / 16          # refined at the contacts
+    # growth by at most a factor 2 per step
+    assert np.all(h[1:-1] / h[:-2] <= 2.0 + 1e-9)
+
+
+def test_counters(short_default):
+    result = short_default
+    # each instance steps once per accepted step plus once per rejected one
+    for name, count in result.do_steps.items():
+        assert count == result.communication_steps + result.rollbacks, name
+    assert result.communication_steps == result.time.size - 1
+    assert result.stats["missed_events"] == 0
+    assert result.fmu_calls > 4 * result.communication_steps
+
+
+def test_energy_balance_closes(short_default):
+    """Plain force law under Gauss-Seidel: the contact's work F (delta_new - delta_old) is what
+    the buildings receive, so the balance closes to round-off (1e-9 of the input)."""
+    e = energy_history(short_default)
+    # while the contact is closed the residual is the elastic energy it holds
+    open_ = short_default["pounding_3.F"] == 0.0
+    assert np.max(np.abs(e["residual"][open_])) <= 1e-9 * np.max(np.abs(e["input"]))
+    assert short_default.energy_residual_J == pytest.approx(e["residual"][-1])
+
+
+def test_agrees_with_reference(catalog, short_default):
+    """Within the accuracy criteria of docs/accuracy.md: peak force 1 %, same impacts,
+    dissipated energy 2 %, peak displacements 0.5 %."""
+    scene = short_default.scene
+    ref = reference_for_scene(scene, {"rtol": 1e-9})
+    result = short_default
+    assert ref.impacts == 3
+    assert result["pounding_3.impacts"][-1] == ref.impacts
+    assert result["pounding_3.F_max"][-1] == pytest.approx(ref.peak_force_N, rel=0.01)
+    assert result["pounding_3.E_dissipated"][-1] == pytest.approx(ref.dissipated_energy_J, rel=0.02)
+    for b, peak in zip(scene.buildings, ref.peak_displacements):
+        u = max(np.max(np.abs(result[f"{b.name}.x[{i}]"])) for i in range(1, scene.n_storeys(b.name) + 1))
+        assert u == pytest.approx(float(np.max(peak)), rel=0.005)
+    # the onsets land within one contact step of the reference's
+    onsets = result.time[np.flatnonzero(np.diff(result["pounding_3.impacts"]) > 0)]
+    np.testing.assert_allclose(onsets, [i.t_onset for i in ref.impact_list], atol=1e-3)
+
+
+class LatePrediction(Adaptive):
+    """Adaptive whose closure prediction is 4 times too late (a failing prediction), saving
+    states before every step that may close a gap."""
+
+    name = "late-prediction"
+
+    def _plan(self):
+        h_target, closures = super()._plan()
+        if not closures:          # in contact, or no closure possible: unchanged
+            return h_target, closures
+        return min(self.h_max, 4.0 * h_target), [4.0 * s for s in closures]
+
+
+def test_rollback_when_the_prediction_fails(catalog):
+    """With a prediction that is too late, the steps that close a gap are rolled back
+    (fmi2SetFMUstate on every FMU) and retried shorter; the result agrees with the normal run
+    to the accuracy of the scheme, and each FMU stepped once per accepted or rejected step."""
+    overrides = PLAIN_ADAPTIVE + ["stop_time=4.2"]
+    late = run(catalog, "default", overrides, strategy=LatePrediction, risk_factor=1e9)
+    normal = run(catalog, "default", overrides)
+    assert late.rollbacks >= 3           # at least one per impact
+    assert late.stats["missed_events"] == 0
+    assert late["pounding_3.impacts"][-1] == normal["pounding_3.impacts"][-1] == 3
+    # both first order in the same contact step: the same impacts to 1 %
+    assert late["pounding_3.F_max"][-1] == pytest.approx(normal["pounding_3.F_max"][-1], rel=0.01)
+    assert late["pounding_3.E_dissipated"][-1] == pytest.approx(normal["pounding_3.E_dissipated"][-1], rel=0.01)
+    for name, count in late.do_steps.items():
+        assert count == late.communication_steps + late.rollbacks, name
+    # a restored step leaves no trace: the energy balance still closes to round-off
+    e = energy_history(late)
+    open_ = late["pounding_3.F"] == 0.0
+    assert np.max(np.abs(e["residual"][open_])) <= 1e-9 * np.max(np.abs(e["input"]))
+
+
+# -- the stability guard ------------------------------------------------------------------------
+def test_guard_stops_a_plain_law_step_longer_than_the_contact(catalog):
+    """Plain force law at a fixed 1 ms step on a 40 us contact: stopped, with what to change."""
+    scene = {"name": "stiff", "stop_time": 0.05, "step": 1e-3, "coupling": "gauss-seidel",
+             "buildings": {"left": {"m": [1.0], "k": [0.0], "zeta": 0.0, "v0": [0.5]},
+                           "right": {"m": [1.0], "k": [0.0], "zeta": 0.0, "v0": [-0.5]}},
+             "pounding": {"floors": [1], "gap": 0.0105, "k": 1e12, "resolve_impacts": False}}
+    with pytest.raises(InstabilityError) as info:
+        run(catalog, scene)
+    error = info.value
+    assert error.reason in ("penetration", "energy")
+    assert error.instance == "pounding_1"
+    text = str(error)
+    assert "resolve_impacts=true" in text and "adaptive" in text
+    step = float(text.split("step below ")[1].split(" s")[0])
+    assert 1e-7 < step < 1e-5          # a tenth of the ~1.2e-5 s impact time scale
+    # the advice works: resolved impacts at the same step, or adaptive, run through
+    run(catalog, scene, ["pounding.resolve_impacts=true"])
+    run(catalog, scene, ['coupling="adaptive"'])
+    # and the guard can be switched off (numbers then mean nothing)
+    run(catalog, scene, check_stability=False)
+
+
+def test_guard_flags_non_finite_and_energy(catalog):
+    loaded = load_scene("default", ["stop_time=0.1"], catalog)
+    with System(loaded, catalog) as system:
+        simulate(system, progress=False)
+        guard = StabilityGuard(system)
+        assert guard.problem(0.1, 0.01) is None
+        i = system.columns.index("left.x[2]")
+        system.y[i] = math.nan
+        error = guard.problem(0.1, 0.01)
+        assert error.reason == "non-finite" and "left.x[2]" in str(error)
+        system.y[i] = 0.0
+        j = system.columns.index("pounding_3.E_dissipated")
+        system.y[j] = -1.0 - 0.02 * guard.E_avail
+        assert guard.problem(0.1, 0.01).reason == "energy"
+        system.y[j] = 0.0
+        k = system.columns.index("pounding_3.delta")
+        system.y[k] = 1.0      # a metre of concrete penetration
+        assert guard.problem(0.1, 0.01).reason == "penetration"
