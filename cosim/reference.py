@@ -239,8 +239,9 @@ class _System:
         self.dof_right = np.array([self.offsets[c.right] + c.right_floor - 1 for c in self.contacts], dtype=np.intp)
         self.gaps = np.array([c.gap for c in self.contacts], dtype=float)
         self.ag = ag
-        # state layout: [u (n), v (n), E_input, E_damping, W_contact]
-        self.size = 2 * n + 3
+        # state layout: [u (n), v (n), E_input, E_damping, W_contact (one per contact)]; the
+        # work is kept per contact so that impacts overlapping in time are charged separately
+        self.size = 2 * n + 2 + len(self.contacts)
 
     def kinematics(self, y):
         """Penetrations ``delta`` (m) and rates ``delta'`` (m/s) of every contact."""
@@ -271,14 +272,14 @@ class _System:
                 forces, rate = self.contact_forces(y, phases, v_imp)
                 np.subtract.at(f, left, forces)
                 np.add.at(f, right, forces)
-                work = float(forces @ rate)
+                work = forces * rate
             a_g = float(ag(t))
             dy = np.empty_like(y)
             dy[:n] = v
             dy[n:2 * n] = minv * f - a_g
             dy[2 * n] = -a_g * float(masses @ v)
             dy[2 * n + 1] = float(v @ (C @ v))
-            dy[2 * n + 2] = work
+            dy[2 * n + 2:] = work
             return dy
         return fun
 
@@ -309,10 +310,11 @@ class _System:
                     J[row, j] -= sign_f * self.minv[dof] * dF_dd
                     J[row, n + i] += sign_f * self.minv[dof] * dF_dr
                     J[row, n + j] -= sign_f * self.minv[dof] * dF_dr
-                J[2 * n + 2, i] += dF_dd * rate[c]
-                J[2 * n + 2, j] -= dF_dd * rate[c]
-                J[2 * n + 2, n + i] += dF_dr * rate[c] + F
-                J[2 * n + 2, n + j] -= dF_dr * rate[c] + F
+                w = 2 * n + 2 + c
+                J[w, i] += dF_dd * rate[c]
+                J[w, j] -= dF_dd * rate[c]
+                J[w, n + i] += dF_dr * rate[c] + F
+                J[w, n + j] -= dF_dr * rate[c] + F
             return J
         return jac
 
@@ -441,7 +443,7 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
                              f"with the floors apart (x_left - x_right < gap)")
 
     if atol is None:
-        atol_vec = np.concatenate((np.full(n, 1e-2 * rtol), np.full(n, 1e-1 * rtol), np.full(3, rtol)))
+        atol_vec = np.concatenate((np.full(n, 1e-2 * rtol), np.full(n, 1e-1 * rtol), np.full(2 + len(contacts), rtol)))
     else:
         atol_vec = float(atol)
     if t_output is None:
@@ -531,7 +533,7 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
                 phases[c] = APPROACH
                 v_imp[c] = rate[c]
                 open_impacts[c] = dict(contact=c, t_onset=t, v_impact=float(rate[c]), peak_force_N=0.0,
-                                       max_penetration=0.0, work0=float(y[2 * n + 2]))
+                                       max_penetration=0.0, work0=float(y[2 * n + 2 + c]))
                 if rate[c] <= 0.0:   # grazing contact: no approach phase
                     phases[c] = RESTITUTION
             elif kind == "max_penetration":
@@ -544,25 +546,26 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
                 phases[c] = OPEN
                 overlap[c] = kind == "force_separation" and delta[c] > 0.0
                 rec = open_impacts.pop(c)
-                impacts.append(_close_impact(rec, t, float(y[2 * n + 2]) - rec.pop("work0")))
+                impacts.append(_close_impact(rec, t, float(y[2 * n + 2 + c]) - rec.pop("work0")))
 
     # impacts still closed at the end: dissipated = work - stored elastic energy
     delta_end, _ = system.kinematics(y)
     stored_end = system.stored_energy(np.where(np.array([p != OPEN for p in phases]), delta_end, 0.0))
     for c, rec in sorted(open_impacts.items()):
-        work = float(y[2 * n + 2]) - rec.pop("work0")
+        work = float(y[2 * n + 2 + c]) - rec.pop("work0")
         impacts.append(_close_impact(rec, math.nan, work - stored_end[c]))
     impacts.sort(key=lambda imp: imp.t_onset)
 
     # histories on the output grid (phases re-derived from the impact list)
     u_out, v_out = y_out[:, :n], y_out[:, n:2 * n]
     forces, deltas, stored = _force_history(system, t_output, y_out, impacts)
+    contact_work = y_out[:, 2 * n + 2:].sum(axis=1)
     kinetic = 0.5 * np.einsum("ij,j,ij->i", v_out, system.masses, v_out)
     strain = 0.5 * np.einsum("ij,jk,ik->i", u_out, system.K, u_out)
     e0 = 0.5 * float(y0[n:2 * n] @ (system.masses * y0[n:2 * n])) + 0.5 * float(y0[:n] @ system.K @ y0[:n])
     energies = Energies(input=y_out[:, 2 * n], kinetic=kinetic, strain=strain, damping=y_out[:, 2 * n + 1],
-                        contact_work=y_out[:, 2 * n + 2], contact_stored=stored.sum(axis=1),
-                        residual=y_out[:, 2 * n] + e0 - (kinetic + strain + y_out[:, 2 * n + 1] + y_out[:, 2 * n + 2]))
+                        contact_work=contact_work, contact_stored=stored.sum(axis=1),
+                        residual=y_out[:, 2 * n] + e0 - (kinetic + strain + y_out[:, 2 * n + 1] + contact_work))
     peak_u = peaks.refined()
 
     return ReferenceResult(

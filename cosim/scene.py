@@ -6,7 +6,7 @@ A scene reads like the system it describes::
     description = "..."
     stop_time = 30.0          # s
     step = 0.01               # s, communication step
-    coupling = "gauss-seidel" # or "jacobi"
+    coupling = "adaptive"     # or "gauss-seidel", "jacobi"
 
     [ground]                  # ground_motion.fmu parameters; no table = free vibration
     record = "elcentro1940"
@@ -314,7 +314,7 @@ class _Builder:
         step = self._positive(raw, "step")
         if step > stop_time:
             raise self.error(f"step = {step} s is longer than stop_time = {stop_time} s", "step")
-        coupling = raw.get("coupling", "gauss-seidel")
+        coupling = raw.get("coupling", "adaptive")
         if coupling not in COUPLINGS:
             raise self.error(f"coupling = {coupling!r} is not one of {', '.join(COUPLINGS)}", "coupling")
 

@@ -114,7 +114,7 @@ def test_units_are_defined_by_si_base_units(ssd):
 def test_cli_prints_what_ssp_cannot_express(fmu_dir, tmp_path, capsys):
     assert run_main(["default", "--export-ssp", str(tmp_path / "d.ssp"), "--fmu-dir", str(fmu_dir)]) == 0
     out = capsys.readouterr().out
-    assert "coupling = 'gauss-seidel' is not expressible in SSP 1.0" in out
+    assert "coupling = 'adaptive' is not expressible in SSP 1.0" in out
     assert run_main(["default", "--coupling", "jacobi", "--export-ssp", str(tmp_path / "j.ssp"),
                      "--fmu-dir", str(fmu_dir)]) == 0
     assert "not expressible" not in capsys.readouterr().out
@@ -147,7 +147,7 @@ def test_round_trip_reproduces_the_original_run_exactly(exported, scene, fmu_dir
     original = run_scene("default", fmu_dir=fmu_dir, write=False, progress=False).result
     with Catalog(tmp_path / "fmus") as catalog, System(back, catalog) as system:
         again = simulate(system, progress=False)
-    assert again.strategy == "gauss-seidel" and again.columns == original.columns
+    assert again.strategy == "adaptive" and again.columns == original.columns
     np.testing.assert_array_equal(again.time, original.time)
     np.testing.assert_array_equal(again.values, original.values)   # bit for bit
 
@@ -176,7 +176,7 @@ def test_a_floor_pounded_from_both_sides_is_not_expressible(fmu_dir, tmp_path):
 def test_three_buildings_pounding_on_different_floors_export(fmu_dir, tmp_path):
     """Each input fed once: exportable, and it reads back to the same scene."""
     row = load_scene(_three_in_a_row([[2, 1]]))   # west 2 - middle 1, middle 2 - east 1
-    with pytest.warns(SspWarning, match="coupling = 'gauss-seidel' is not expressible"):
+    with pytest.warns(SspWarning, match="coupling = 'adaptive' is not expressible"):
         path, notes = export_scene(row, tmp_path / "row.ssp", fmu_dir)
     back = load_ssp(path, tmp_path / "x")
     assert back.connections() == row.connections() and back.levels == row.levels

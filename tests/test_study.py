@@ -87,10 +87,14 @@ def test_small_study_matches_single_runs(tmp_path, fmu_dir, client):
             for column in PHYSICS:
                 assert row[column] == expected[column], (case.values, column)
 
-    # each worker built its FMU instances once and reset them for its other cases
-    built = client.run(lambda dask_worker: {n: p.runner.systems_built for n, p in dask_worker.plugins.items()
-                                            if n.startswith("cosim-study-")})
-    assert all(v == 1 for per_worker in built.values() for v in per_worker.values())
+    # each worker built its FMU instances once and reset them for its other cases; a failed
+    # case drops them (an FMU that refused a step is not trusted again), so it may add one build
+    built = client.run(lambda dask_worker: (f"{os.uname().nodename}:{os.getpid()}",
+                                            [p.runner.systems_built for n, p in dask_worker.plugins.items()
+                                             if n.startswith("cosim-study-")]))
+    for worker, counts in built.values():
+        failed = sum(r["status"] != "ok" for r in rows if r["worker"] == worker)
+        assert len(counts) == 1 and 1 <= counts[0] <= 1 + failed, (worker, counts, failed)
 
     import pyarrow.parquet as pq
 
