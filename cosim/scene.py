@@ -47,7 +47,10 @@ Rules (checked before anything is instantiated, each a one-line
   ``m1``/``m2`` default to the floor masses of the left/right building at that
   level.  No table, or fewer than two buildings: no contact instance.
 * A gap already closed at t = 0 (``x0_left - x0_right - gap > 0``) is an
-  error unless ``allow_initial_overlap = true``.
+  error unless ``allow_initial_overlap = true``.  With ``resolve_impacts = true``
+  the contact FMU takes such an overlap as the touching point (no preload: the
+  resolver models impacts, which start at a crossing); the plain force law
+  (``resolve_impacts = false``) pushes the floors apart from the first step.
 
 Overrides (``--set``) use instance names: ``pounding.gap=0.02`` (every
 contact instance), ``pounding_3.CR=0.5`` (one), ``left.m[1]=2e5``,

@@ -581,6 +581,9 @@ class ImpactResolver:
             t += s
             self._start(v_on)
             out.impacts_started += 1
+        # the force law is compressive; a quadrature of a force that fades to zero at
+        # separation can sum to -1e-29 N s, which must not reach the host as tension
+        out.impulse = max(out.impulse, 0.0)
         out.mean_force = out.impulse / h
         self.host = (delta, delta_dot, h, out.mean_force, self.host[3] if self.host else 0.0)
         return out
