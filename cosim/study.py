@@ -475,7 +475,18 @@ class StudyPlugin(WorkerPlugin):
         for name, data in self.files.items():
             (folder / f"{name}.fmu").write_bytes(data)
         self.files = {}
-        self.runner = CaseRunner(folder)
+        self.folder = folder
+
+    def case_runner(self) -> CaseRunner:
+        """The worker's runner, created by the first case, in the thread that runs the cases.
+
+        Loading the pythonfmu FMUs in the worker's event-loop thread (``setup``) and stepping
+        them in its task thread corrupts the heap: glibc aborts the worker process at exit
+        ("free(): corrupted unsorted chunks").
+        """
+        if self.runner is None:
+            self.runner = CaseRunner(self.folder)
+        return self.runner
 
     def teardown(self, worker) -> None:
         if self.runner is not None:
@@ -486,7 +497,7 @@ class StudyPlugin(WorkerPlugin):
 def _run_case_on_worker(plugin_name: str, scene_raw: dict, overrides: list[str], tolerance: float) -> dict:
     from distributed import get_worker
 
-    return get_worker().plugins[plugin_name].runner.run(scene_raw, overrides, tolerance)
+    return get_worker().plugins[plugin_name].case_runner().run(scene_raw, overrides, tolerance)
 
 
 def connect(scheduler: str | None = None, workers: int | None = None,
@@ -744,7 +755,12 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
         t1 = time.perf_counter()
         if pending:
             client.register_plugin(plugin, name=plugin.name)
-            rows, failed = _execute(client, plugin.name, study, pending, writer, progress, len(cases) - len(pending))
+            try:
+                rows, failed = _execute(client, plugin.name, study, pending, writer, progress,
+                                        len(cases) - len(pending))
+            finally:
+                if own:   # free the workers' FMU instances while their interpreters are alive
+                    _unregister(client, plugin.name)
         elapsed_s = time.perf_counter() - t1
     finally:
         if writer is not None:
@@ -757,6 +773,13 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
     return StudyResult(study, folder, folder / "results.csv", folder / "results.parquet", len(cases),
                        len(cases) - len(pending), len(rows), failed, n_workers, startup_s, elapsed_s,
                        validation_s, rows)
+
+
+def _unregister(client, name: str) -> None:
+    try:
+        client.unregister_worker_plugin(name)
+    except Exception:  # noqa: BLE001 - a worker already gone has nothing left to free
+        pass
 
 
 def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer: _RowWriter,
