@@ -388,25 +388,13 @@ def plot(study: Study, path: Path) -> None:
 
 def write_study(study: Study, folder: str | Path) -> Path:
     """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` in ``folder`` (written complete)."""
-    import os
-    import shutil
+    from .files import replaced_folder
 
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = folder.parent / f".{folder.name}.partial-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    try:
+    with replaced_folder(folder) as tmp:
         write_csv(study, tmp / "accuracy.csv")
         (tmp / "accuracy.md").write_text(markdown(study))
         plot(study, tmp / "accuracy.png")
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if folder.exists():
-        shutil.rmtree(folder)
-    tmp.rename(folder)
-    return folder
+    return Path(folder)
 
 
 def main(scene: str, out: str | Path | None, overrides: Sequence[str] = (), fmu_dir=None,

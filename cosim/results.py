@@ -20,13 +20,12 @@ at the end: a folder under its final name is always complete.
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .files import replaced_folder
 from .master import SimulationResult
 from .scene import _element
 
@@ -164,28 +163,13 @@ def write_results(result: SimulationResult, folder: str | Path, plots: bool = Tr
     Everything goes to a temporary sibling first, renamed at the end; an
     existing ``folder`` is replaced only once the new one is complete.
     """
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = folder.parent / f".{folder.name}.partial-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    try:
+    with replaced_folder(folder) as tmp:
         summary = summary or summarize(result)
         write_history(result, tmp / "history.csv")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         if plots:
             plot_all(result, tmp)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if folder.exists():
-        old = folder.parent / f".{folder.name}.old-{os.getpid()}"
-        folder.rename(old)
-        tmp.rename(folder)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        tmp.rename(folder)
-    return folder
+    return Path(folder)
 
 
 # -- plots -------------------------------------------------------------------------------------------
@@ -202,6 +186,16 @@ def plot_all(result: SimulationResult, folder: Path) -> list[Path]:
                 plot_hysteresis(result, folder / "hysteresis.png", plt)]
     return out
 
+
+
+def _finish(fig, ax, path: Path, plt, title: str, loc: str = "best") -> None:
+    """Title, grid and legend as every result plot has them; save at 110 dpi and free the figure."""
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc=loc, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 def plot_displacements(result: SimulationResult, path: Path, plt) -> Path:
     scene = result.scene
@@ -223,12 +217,7 @@ def plot_displacements(result: SimulationResult, path: Path, plt) -> Path:
             marked = True
     ax.set_xlabel("time [s]")
     ax.set_ylabel("displacement relative to the ground [m]")
-    ax.set_title(f"{scene.name}: floor displacements")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, plt, f"{scene.name}: floor displacements", loc="upper right")
     return path
 
 
@@ -244,12 +233,7 @@ def plot_contact_force(result: SimulationResult, path: Path, plt) -> Path:
             ax.plot(times, np.zeros_like(times), "|", color=line.get_color(), ms=10)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("contact force [kN]")
-    ax.set_title(f"{result.scene.name}: contact force")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, plt, f"{result.scene.name}: contact force", loc="upper right")
     return path
 
 
@@ -271,12 +255,7 @@ def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
         ax.plot(d * 1e3, np.where(on, force, np.nan) / 1e3, ".-", lw=0.8, ms=3, label=c.name)
     ax.set_xlabel("penetration delta [mm]")
     ax.set_ylabel("contact force (mean over step) [kN]")
-    ax.set_title(f"{result.scene.name}: force-penetration loops")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, plt, f"{result.scene.name}: force-penetration loops")
     return path
 
 
@@ -291,10 +270,5 @@ def plot_energy(result: SimulationResult, path: Path, plt) -> Path:
     ax.plot(t, e["residual"] / 1e3, "r--", lw=1.0, label="residual")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("energy [kJ]")
-    ax.set_title(f"{result.scene.name}: energy balance")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, plt, f"{result.scene.name}: energy balance", loc="upper left")
     return path

@@ -29,3 +29,12 @@ def fmu_path(fmu_dir):
         assert path.exists(), f"{name}.fmu was not built"
         return path
     return get
+
+
+@pytest.fixture(scope="module")
+def catalog(fmu_dir):
+    """The session's FMUs loaded once per test module (``cosim.master.Catalog``)."""
+    from cosim.master import Catalog
+
+    with Catalog(fmu_dir) as cat:
+        yield cat

@@ -11,6 +11,16 @@ def run(name, fmu_dir, overrides=(), **kwargs):
     return run_scene(name, overrides, fmu_dir=fmu_dir, write=False, progress=False, **kwargs)
 
 
+def simulate_scene(catalog, scene, overrides=(), **options):
+    """Load ``scene`` (name, path or dict) with ``overrides`` and simulate it on ``catalog``'s FMUs."""
+    from cosim.master import System, simulate
+    from cosim.scene import load_scene
+
+    loaded = load_scene(scene, list(overrides), catalog)
+    with System(loaded, catalog) as system:
+        return simulate(system, progress=False, **options)
+
+
 def assert_contact_work_reaches_the_floors(result, scene):
     """The buildings receive each contact's mean force F of [t, t+h] in the same step, on
     the right floors and with opposite signs.

@@ -8,24 +8,13 @@ import pytest
 
 from cosim.adaptive import Adaptive, InstabilityError, StabilityGuard, closure_time
 from cosim.coupling import STRATEGIES, get_strategy
-from cosim.master import Catalog, System, simulate
+from cosim.master import System, simulate
 from cosim.reference import reference_for_scene
 from cosim.results import energy_history
 from cosim.scene import load_scene
+from scenario_checks import simulate_scene as run
 
 PLAIN_ADAPTIVE = ['coupling="adaptive"', "pounding.resolve_impacts=false"]
-
-
-@pytest.fixture(scope="module")
-def catalog(fmu_dir):
-    with Catalog(fmu_dir) as cat:
-        yield cat
-
-
-def run(catalog, scene, overrides=(), **options):
-    loaded = load_scene(scene, list(overrides), catalog)
-    with System(loaded, catalog) as system:
-        return simulate(system, progress=False, **options)
 
 
 # -- the closure prediction ---------------------------------------------------------------------

@@ -22,23 +22,12 @@ import numpy as np
 import pytest
 
 from cosim.adaptive import InstabilityError
-from cosim.master import Catalog, System, simulate
+from cosim.master import System, simulate
 from cosim.reference import reference_for_scene
 from cosim.scene import load_scene
 from fmu_src.contact_laws import law_for
 from fmu_src.impact import simulate_impact
-
-
-@pytest.fixture(scope="module")
-def catalog(fmu_dir):
-    with Catalog(fmu_dir) as cat:
-        yield cat
-
-
-def run(catalog, scene, overrides=(), **options):
-    loaded = load_scene(scene, list(overrides), catalog)
-    with System(loaded, catalog) as system:
-        return simulate(system, progress=False, **options)
+from scenario_checks import simulate_scene as run
 
 
 def available_energy(result) -> float:

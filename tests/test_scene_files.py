@@ -6,17 +6,10 @@ import textwrap
 
 import pytest
 
-from cosim.master import Catalog
 from cosim.scene import SceneError, bundled_scenes, load_scene
 
 REQUIRED = {"default", "elcentro", "kobe", "sanfernando", "parkfield", "single_impact",
             "free_vibration", "one_building", "kasai_maison"}
-
-
-@pytest.fixture(scope="module")
-def catalog(fmu_dir):
-    with Catalog(fmu_dir) as cat:
-        yield cat
 
 
 BASE = """
