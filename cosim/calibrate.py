@@ -48,6 +48,7 @@ from scipy.optimize import brentq
 if __package__ in (None, ""):  # run as a script: make the package importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from cosim.files import replaced_folder  # noqa: E402
 from fmu_src.contact_laws import (DAMPED_MODELS, MODELS, ContactLaw, crvk_printed_constant,  # noqa: E402
                                   effective_mass, published_zeta)
 from fmu_src.impact import calibrate_zeta, goldsmith_loss, simulate_impact  # noqa: E402
@@ -512,6 +513,22 @@ class StiffnessCalibration:
         d["peak_error_relative"] = self.peak_force_N / self.target_peak_N - 1.0
         return d
 
+    def summary(self) -> str:
+        via = "through the FMUs" if self.fmu else "physics level (solve_ivp)"
+        m = effective_mass(self.m1, self.m2)
+        return "\n".join([
+            f"model {self.model}: m1 = {self.m1:g} kg, m2 = {self.m2:g} kg (m = {m:g} kg), n = {self.n:g}, "
+            f"v_imp = {self.v_imp:g} m/s, CR = {self.CR:g}, target peak force = {self.target_peak_N:.6g} N",
+            f"  calibrated k        {self.k:.8g} N/m^{self.n:g}   ({via})",
+            f"  zeta                {self.zeta:.8g}",
+            f"  peak force          {self.peak_force_N:.6g} N   (error {self.peak_force_N / self.target_peak_N - 1.0:+.2e})",
+            f"  achieved CR         {self.achieved_CR:.6f}",
+            f"  loop area           {self.loop_area_J:.6g} J",
+            f"  Goldsmith loss      {self.goldsmith_loss_J:.6g} J",
+            f"  max penetration     {self.max_penetration_m:.6g} m",
+            f"  contact duration    {self.contact_duration_s:.6g} s",
+            f"  cost                {self.fmu_runs} co-simulation(s)"])
+
 
 def calibrate_stiffness(model: str, peak_force: float, CR: float, *, m1: float, m2: float, v_imp: float,
                         n: float = 1.5, zeta: float | None = None, k_bounds: tuple[float, float] | None = None,
@@ -641,20 +658,11 @@ def plot_calibration(res: CalibrationResult | StiffnessCalibration, out: Path) -
 
 def write_outputs(res: CalibrationResult | StiffnessCalibration, out: str | Path, plots: bool = True) -> Path:
     """Write ``calibration.json`` (and the plots) into ``out``, complete or not at all."""
-    out = Path(out)
-    tmp = out.with_name(out.name + ".tmp")
-    if tmp.exists():
-        import shutil
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
-    (tmp / "calibration.json").write_text(json.dumps(res.to_dict(), indent=2) + "\n")
-    if plots:
-        plot_calibration(res, tmp)
-    if out.exists():
-        import shutil
-        shutil.rmtree(out)
-    tmp.rename(out)
-    return out
+    with replaced_folder(out) as tmp:
+        (tmp / "calibration.json").write_text(json.dumps(res.to_dict(), indent=2) + "\n")
+        if plots:
+            plot_calibration(res, tmp)
+    return Path(out)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -670,7 +678,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--cr", type=float, required=True, help="target (or assumed) coefficient of restitution")
     parser.add_argument("--peak-force", type=float, help="calibrate k to this measured peak force [N]")
     parser.add_argument("--zeta-bounds", type=float, nargs=2, default=(0.0, ZETA_MAX), metavar=("LOW", "HIGH"),
-                        help="search interval of the damping constant (default 0 %(default)s)")
+                        help=f"search interval of the damping constant (default 0 {ZETA_MAX:g})")
     parser.add_argument("--no-fmu", action="store_true", help="physics level only (no co-simulation)")
     parser.add_argument("--fmu-dir", type=Path, help="folder with the FMUs (default: build them into build/fmus)")
     parser.add_argument("--out", type=Path, help="write calibration.json, loop.png, force_time.png here")
@@ -682,7 +690,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise CalibrationError("give either --k (calibrate zeta) or --peak-force (calibrate k), not both")
             res = calibrate_stiffness(args.model, args.peak_force, args.cr, m1=args.m1, m2=args.m2, v_imp=args.v_imp,
                                       n=args.n, fmu=not args.no_fmu, fmu_dir=args.fmu_dir)
-            print(json.dumps(res.to_dict(), indent=2))
+            print(res.summary())
         else:
             if args.k is None:
                 raise CalibrationError("--k is required (contact stiffness in N/m^n), or --peak-force to calibrate it")
