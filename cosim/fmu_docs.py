@@ -53,15 +53,30 @@ def markdown_table(fmu: str | Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
+    """Print the variable tables of every FMU; exit code 0, or 2 if an FMU file is missing."""
+    import argparse
+
     root = Path(__file__).resolve().parents[1]
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     from build_fmu import DEFAULT_OUT, FMUS, build_all
 
-    folder = Path(argv[0]) if argv else DEFAULT_OUT
-    if not argv:
+    parser = argparse.ArgumentParser(
+        prog="python -m cosim.fmu_docs",
+        description="Print the Markdown variable tables of the FMUs (pasted into README.md; "
+                    "tests/test_readme_variables.py checks they are in sync).")
+    parser.add_argument("fmu_dir", nargs="?", type=Path, default=None, metavar="FMU_DIR",
+                        help="folder holding the built FMUs (default: build them into build/fmus, "
+                             "rebuilt when fmu_src/ changed)")
+    args = parser.parse_args(argv)
+    folder = args.fmu_dir
+    if folder is None:
+        folder = DEFAULT_OUT
         build_all(folder)
+    missing = [f"{spec.name}.fmu" for spec in FMUS if not (folder / f"{spec.name}.fmu").is_file()]
+    if missing:
+        parser.exit(2, f"error: {folder}: no {', '.join(missing)} (build them with "
+                       f"`python build_fmu.py --out {folder}`, or omit FMU_DIR)\n")
     for spec in FMUS:
         print(f"#### `{spec.name}.fmu`: {spec.summary}\n")
         print(markdown_table(folder / f"{spec.name}.fmu"))

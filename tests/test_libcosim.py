@@ -29,7 +29,7 @@ TOLERANCE = 1e-3
 
 @pytest.fixture(scope="module")
 def ours(fmu_dir):
-    """The whole default scene (40 s, 4000 steps, about 20 impacts) in our Jacobi master."""
+    """The whole default scene (40 s, 4000 steps of 10 ms, 12 impacts) in our Jacobi master."""
     return run_scene("default", coupling="jacobi", fmu_dir=fmu_dir, write=False, progress=False)
 
 
