@@ -107,4 +107,6 @@ stop_time = {args.stop_time!r}
 
 
 if __name__ == "__main__":
-    main()
+    from cosim.fmi import exit_process
+
+    exit_process(main())

@@ -27,13 +27,15 @@ from __future__ import annotations
 
 import atexit
 import itertools
+import os
 import shutil
+import sys
 import weakref
 from collections import deque
 from ctypes import POINTER, byref, c_char_p, c_double, c_int, c_uint
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Mapping, NoReturn, Sequence
 
 import numpy as np
 from fmpy import extract, read_model_description
@@ -72,6 +74,8 @@ _FREE = fmi2CallbackFreeMemoryTYPE(free)
 # first imported from: deleting that folder while the process lives would break
 # every later instance of the same FMU.
 _EXTRACTED: dict[tuple[str, int, int], Path] = {}
+# Paths of the FMUs whose library has been loaded (never unloaded: see Instance.free).
+_LOADED: set[str] = set()
 
 
 def _extract_once(path: Path) -> Path:
@@ -87,6 +91,33 @@ def _extract_once(path: Path) -> Path:
 def _remove_extracted() -> None:
     for folder in _EXTRACTED.values():
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def libraries_loaded() -> bool:
+    """True once an FMU's shared library has been loaded into this process."""
+    return bool(_LOADED)
+
+
+def exit_process(code: int | None) -> NoReturn:
+    """End a program that ran FMUs in this process, with exit status ``code``.
+
+    When the interpreter has been finalised and the C runtime runs the shared libraries'
+    destructors, with pythonfmu libraries still loaded, about one run in 25 aborts on a
+    corrupted heap ("corrupted double-linked list", caught in libgfortran's exit-time
+    close; PythonFMU issue #228 reports the same): a finished run then exits with 134.
+    Callers have closed everything they wrote.  So once a library is loaded, the process
+    flushes its output, removes the extracted FMUs and ends with ``os._exit``, skipping the
+    finalisation; otherwise it exits normally.
+    """
+    if not _LOADED:
+        raise SystemExit(code)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):   # closed or broken pipe: nothing left to save
+            pass
+    _remove_extracted()
+    os._exit(0 if code is None else code if isinstance(code, int) else 1)   # as SystemExit reads it
 
 
 class FMUError(RuntimeError):
@@ -239,6 +270,7 @@ class Instance:
         addLoggerProxy(byref(self._callbacks))
         self._slave = FMU2Slave(guid=md.guid, unzipDirectory=str(fmu.unzip_dir),
                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        _LOADED.add(str(fmu.path))
         self.functions = self._slave._functions  # raw ctypes functions, status returned as int
         self._slave.instantiate(callbacks=self._callbacks, loggingOn=True)
         self.component = self._slave.component

@@ -782,4 +782,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from cosim.fmi import exit_process
+
+    exit_process(main())

@@ -963,6 +963,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 if __name__ == "__main__":
     # Run through the package module, not ``__main__``: the tasks and the worker plugin are
     # pickled by reference, and a worker process can import ``cosim.study`` but not our __main__.
+    from cosim.fmi import exit_process
     from cosim.study import main as _main
 
-    raise SystemExit(_main())
+    exit_process(_main())

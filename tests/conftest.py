@@ -38,3 +38,21 @@ def catalog(fmu_dir):
 
     with Catalog(fmu_dir) as cat:
         yield cat
+
+
+_EXIT_STATUS = []
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _EXIT_STATUS.append(int(exitstatus))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """End the test process like the command-line tools do (cosim.fmi.exit_process): once
+    pythonfmu libraries are loaded, a normal interpreter exit can abort on a corrupted heap
+    after every test has passed, and CI would read exit code 134."""
+    from cosim.fmi import exit_process, libraries_loaded
+
+    if libraries_loaded() and _EXIT_STATUS:
+        exit_process(_EXIT_STATUS[-1])
