@@ -154,12 +154,12 @@ def test_single_impact_every_model(host, model):
             assert_matches(out, ke, cr_host, ref, law.m, v)
 
 
-@pytest.mark.parametrize("model", ["jankowski", "crvk", "ye"])
+@pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("ratio", [1e-3, 1e-2, 0.1, 0.5, 1.0, 2.0])
 def test_step_size_independence(host, model, ratio):
-    # Communication step from 1/1000 to twice the contact duration.
+    # Communication step from 1/1000 to twice the contact duration, every model and CR.
     v, m1, m2, k = 10.0, 200.0, 200.0, K_EXAMPLE
-    for CR in (0.1, 0.65):
+    for CR in CRS:
         law = law_for(model, k, 1.5, m1, m2, CR)
         t_c = simulate_impact(law, v).contact_duration
         out, ke, cr_host, ref = impact_run(host, model, CR, v, m1, m2, k, h=ratio * t_c)
