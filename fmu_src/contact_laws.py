@@ -65,6 +65,12 @@ DAMPED_MODELS = tuple(m for m in MODELS if m != "hertz")
 CRVK_PRINTED_FACTOR = 0.0159
 CRVK_PRINTED_EXPONENT = 0.2805
 
+#: latched approach speeds below this [m/s] count as this speed: the Hertz-damp dashpot divides
+#: by v_imp and the impact scales L, T ~ v_imp^(-1/5) need v_imp > 0; a grazing touch at
+#: 1e-6 m/s exchanges no measurable impulse.  (v_imp <= 0, no latched approach, switches the
+#: Hertz-damp dashpot off.)
+MIN_IMPACT_SPEED = 1e-6
+
 
 # ----------------------------------------------------------------------------------------------
 # published damping constants
@@ -332,7 +338,7 @@ class ContactLaw:
         if model in HERTZDAMP_MODELS:
             if v_imp <= 0.0:
                 return spring
-            return spring * (1.0 + self.zeta * delta_dot / v_imp)
+            return spring * (1.0 + self.zeta * delta_dot / max(v_imp, MIN_IMPACT_SPEED))
         # crvk
         if not approaching:
             return spring
@@ -377,7 +383,7 @@ class ContactLaw:
         if model in HERTZDAMP_MODELS:
             if v_imp <= 0.0:
                 return F, dspring, 0.0
-            chi = z / v_imp
+            chi = z / max(v_imp, MIN_IMPACT_SPEED)
             return F, dspring * (1.0 + chi * delta_dot), spring * chi
         if delta_dot <= 0.0:
             return F, dspring, 0.0

@@ -24,8 +24,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq, minimize_scalar
 
-from .contact_laws import (APPROACH_ONLY_MODELS, DAMPED_MODELS, HERTZDAMP_MODELS, MODELS, ContactLaw,
-                           crvk_printed_constant, effective_mass, published_zeta)
+from .contact_laws import (APPROACH_ONLY_MODELS, DAMPED_MODELS, HERTZDAMP_MODELS, MIN_IMPACT_SPEED, MODELS,
+                           ContactLaw, crvk_printed_constant, effective_mass, published_zeta)
 
 
 def goldsmith_loss(m: float, CR: float, v_imp: float) -> float:
@@ -303,9 +303,6 @@ _E1, _E3, _E4, _E5, _E6, _E7 = 71 / 57600, -71 / 16695, 71 / 1920, -17253 / 3392
 #: bodies together again before they separate); a small positive threshold so that the event
 #: cannot fire at the very point where the approach branch ended.
 _REAPPROACH_RATE = 1e-9
-#: onset speeds below this [m/s] are raised to it: the impact scales L, T ~ v_imp^(-1/5) need
-#: v_imp > 0; a grazing touch at 1e-6 m/s exchanges no measurable impulse.
-_MIN_IMPACT_SPEED = 1e-6
 #: guard against an endless impact/flight alternation inside one step (never reached in tests)
 _MAX_IMPACTS_PER_STEP = 1000
 #: branch switches (maximum penetration / re-approach) per step after which re-approach is no
@@ -649,7 +646,7 @@ class ImpactResolver:
     def _start(self, v: float) -> None:
         self.in_contact = True
         self.approaching = True
-        self.v_imp = max(v, _MIN_IMPACT_SPEED)
+        self.v_imp = max(v, MIN_IMPACT_SPEED)
         self.d, self.u, self.e, self.e_top = 0.0, 1.0, 0.0, 0.0
         self.impacts += 1
         self.impact_peak = 0.0
