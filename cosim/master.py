@@ -366,10 +366,13 @@ def simulate(system: System, strategy: str | type | None = None, stop_time: floa
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall
+    stats = dict(getattr(solver, "stats", {}))
+    if guard is not None and guard.step_over_time_scale:
+        stats["step_over_time_scale"] = dict(guard.step_over_time_scale)
     k = recorder.count
     return SimulationResult(
         scene=scene, strategy=cls.name, time=recorder.time[:k].copy(), columns=list(system.columns),
         values=recorder.values[:k].copy(), communication_steps=solver.communication_steps,
         rollbacks=solver.rollbacks, fmu_calls=system.fmu_calls() - calls_before,
         do_steps={n: v - steps_before.get(n, 0) for n, v in system.do_steps().items()},
-        wall_time_s=wall, instances=[n.name for n in system.nodes], stats=dict(getattr(solver, "stats", {})))
+        wall_time_s=wall, instances=[n.name for n in system.nodes], stats=stats)
