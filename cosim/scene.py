@@ -243,9 +243,14 @@ class _Builder:
         self.text = text
         self.catalog = catalog
         self.where = str(path) if path else "scene"
+        #: (table, key) -> the --set text that gave its value: errors name the override, not a file line
+        self.overridden: dict[tuple[str | None, str], str] = {}
 
     # -- errors --------------------------------------------------------------------------------
     def error(self, message: str, key: str | None = None, table: str | None = None) -> SceneError:
+        override = self.overridden.get((table, key.split("[", 1)[0])) if key else None
+        if override:
+            return SceneError(f"--set {override}: {message}")
         line = self._line_of(key, table) if key else None
         loc = f"{self.where}, line {line}" if line else self.where
         return SceneError(f"{loc}: {message}")
@@ -295,17 +300,21 @@ class _Builder:
                     raise SceneError(f"--set {text}: unknown top-level key {variable!r} "
                                      f"(allowed: name, description, stop_time, step, coupling)")
                 raw[variable] = value
+                self.overridden[(None, variable)] = text
             elif instance == "ground":
                 if "ground" not in raw:
                     raise SceneError(f"--set {text}: {self.where} has no ground motion (no [ground] table)")
                 raw["ground"][variable] = value
+                self.overridden[("ground", variable.split("[", 1)[0])] = text
             elif instance in buildings_raw:
                 buildings_raw[instance][variable] = value
+                self.overridden[(f"buildings.{instance}", variable.split("[", 1)[0])] = text
             elif instance == "pounding":
                 if "pounding" not in raw or len(buildings_raw) < 2:
                     raise SceneError(f"--set {text}: {self.where} has no contact instance "
                                      f"(needs a [pounding] table and two buildings)")
                 raw["pounding"][variable] = value
+                self.overridden[("pounding", variable)] = text
             else:
                 contact_overrides.append((instance, variable, value, text))
 
@@ -360,6 +369,7 @@ class _Builder:
                                  f"(instances: {', '.join(names)})")
             if variable in POUNDING_MASTER_KEYS:
                 raise SceneError(f"--set {text}: {variable} applies to every level; use pounding.{variable}")
+            self.overridden[(instance, variable)] = text
             by_name[instance].parameters.update(self._flat_parameters({variable: value}, POUNDING, instance))
 
         # contact masses default to the floor masses at that level
@@ -368,11 +378,15 @@ class _Builder:
             right = next(b for b in buildings if b.name == level.right)
             spec.parameters.setdefault("m1", float(left.parameters[f"m[{level.floor_left}]"]))
             spec.parameters.setdefault("m2", float(right.parameters[f"m[{level.floor_right}]"]))
-            for key in ("m1", "m2", "k"):
-                if key in spec.parameters and self._number(spec.parameters[key], key, "pounding") <= 0:
-                    raise self.error(f"{spec.name}.{key} = {spec.parameters[key]!r} must be > 0", key, "pounding")
-            if "gap" in spec.parameters and self._number(spec.parameters["gap"], "gap", "pounding") < 0:
-                raise self.error(f"{spec.name}.gap = {spec.parameters['gap']!r} m must be >= 0", "gap", "pounding")
+            for key in ("m1", "m2", "k", "gap"):
+                value = spec.parameters.get(key)
+                if value is None:
+                    continue
+                table = spec.name if (spec.name, key) in self.overridden else "pounding"
+                if key == "gap" and self._number(value, key, table) < 0:
+                    raise self.error(f"{spec.name}.gap = {value!r} m must be >= 0", key, table)
+                if key != "gap" and self._number(value, key, table) <= 0:
+                    raise self.error(f"{spec.name}.{key} = {value!r} must be > 0", key, table)
 
         scene = Scene(name, description, stop_time, step, coupling, ground, buildings, contacts, levels,
                       allow_overlap, self.path)

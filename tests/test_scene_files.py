@@ -97,6 +97,11 @@ def test_overrides(tmp_path, catalog):
     ("pounding.CR=high", "CR = 'high' must be a Real"),
     ("duration=3", "unknown top-level key 'duration'"),
     ("gap", "expected instance.variable=value"),
+    # a bad value from --set is located at the --set, not at a file line that holds a good one
+    ("left.m[1]=-5", r"^--set left\.m\[1\]=-5: buildings\.left\.m\[1\] = -5\.0 kg: a mass must be > 0$"),
+    ("pounding.gap=-0.1", r"^--set pounding\.gap=-0\.1: pounding_1\.gap = -0\.1 m must be >= 0$"),
+    ("pounding_1.k=0", r"^--set pounding_1\.k=0: pounding_1\.k = 0\.0 must be > 0$"),
+    ("step=-1", r"^--set step=-1: step = -1 must be a number > 0"),
 ])
 def test_bad_override_is_a_one_line_error(tmp_path, catalog, override, match):
     with pytest.raises(SceneError) as info:
