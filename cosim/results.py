@@ -148,7 +148,6 @@ def warnings(contacts: dict[str, dict[str, Any]]) -> list[str]:
     return out
 
 
-
 def format_summary(summary: dict[str, Any]) -> str:
     """A short human-readable block for the terminal."""
     lines = [f"scene {summary['scene']}: {summary['description']}".rstrip(": "),

@@ -248,7 +248,9 @@ class _Builder:
 
     # -- errors --------------------------------------------------------------------------------
     def error(self, message: str, key: str | None = None, table: str | None = None) -> SceneError:
-        override = self.overridden.get((table, key.split("[", 1)[0])) if key else None
+        # an element's own override, else one that set the whole array
+        override = (self.overridden.get((table, key)) or self.overridden.get((table, key.split("[", 1)[0]))
+                    if key else None)
         if override:
             return SceneError(f"--set {override}: {message}")
         line = self._line_of(key, table) if key else None
@@ -305,10 +307,10 @@ class _Builder:
                 if "ground" not in raw:
                     raise SceneError(f"--set {text}: {self.where} has no ground motion (no [ground] table)")
                 raw["ground"][variable] = value
-                self.overridden[("ground", variable.split("[", 1)[0])] = text
+                self.overridden[("ground", variable)] = text
             elif instance in buildings_raw:
                 buildings_raw[instance][variable] = value
-                self.overridden[(f"buildings.{instance}", variable.split("[", 1)[0])] = text
+                self.overridden[(f"buildings.{instance}", variable)] = text
             elif instance == "pounding":
                 if "pounding" not in raw or len(buildings_raw) < 2:
                     raise SceneError(f"--set {text}: {self.where} has no contact instance "

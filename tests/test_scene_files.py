@@ -102,11 +102,19 @@ def test_overrides(tmp_path, catalog):
     ("pounding.gap=-0.1", r"^--set pounding\.gap=-0\.1: pounding_1\.gap = -0\.1 m must be >= 0$"),
     ("pounding_1.k=0", r"^--set pounding_1\.k=0: pounding_1\.k = 0\.0 must be > 0$"),
     ("step=-1", r"^--set step=-1: step = -1 must be a number > 0"),
+    ("left.m=[-5.0, 3.0e5]", r"^--set left\.m=\[-5\.0, 300000\.0\]: buildings\.left\.m\[1\] = -5\.0 kg"),
 ])
 def test_bad_override_is_a_one_line_error(tmp_path, catalog, override, match):
     with pytest.raises(SceneError) as info:
         load_scene(write(tmp_path), [override], catalog)
     assert re.search(match, one_line_error(info)), str(info.value)
+
+
+def test_a_bad_file_value_beside_a_good_override_is_located_in_the_file(tmp_path, catalog):
+    path = write(tmp_path, BASE.replace("m = [1.0e5, 2.0e5]", "m = [1.0e5, -2.0e5]"))
+    with pytest.raises(SceneError) as info:
+        load_scene(path, ["left.m[1]=5.0e4"], catalog)
+    assert re.search(r"t\.toml, line 8: buildings\.left\.m\[2\] = -200000\.0 kg", one_line_error(info))
 
 
 def test_override_of_an_instance_the_scene_does_not_have(catalog):
