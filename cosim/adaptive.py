@@ -51,12 +51,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fmu_src.contact_laws import MIN_IMPACT_SPEED, law_for
+
 from .coupling import STRATEGIES, CouplingStrategy
 from .master import System
 
 # Slowest approach speed the time scale is evaluated at (m/s): below it T = L/v grows
-# without physical meaning (a resting contact has no impact time scale).
-_V_FLOOR = 1e-6
+# without physical meaning (a resting contact has no impact time scale); the contact laws'
+# own floor on a latched impact speed.
+_V_FLOOR = MIN_IMPACT_SPEED
 
 
 class InstabilityError(RuntimeError):
@@ -144,6 +147,11 @@ class _Level:
         return (item(self.ix1) - item(self.ix2) - self.gap, item(self.iv1) - item(self.iv2),
                 item(self.ia1) - item(self.ia2))
 
+    def approach_speed(self, y: np.ndarray) -> float:
+        """Speed (m/s) an impact's time scale is taken at: the latched ``v_impact`` or the
+        current closing rate, whichever is larger."""
+        return max(y.item(self.i_vimp), abs(y.item(self.iv1) - y.item(self.iv2)))
+
 
 def _parameter(node, name: str):
     if name in node.spec.parameters:
@@ -153,8 +161,6 @@ def _parameter(node, name: str):
 
 def contact_levels(system: System) -> list[_Level]:
     """The contact levels of ``system`` with the output indices the master needs."""
-    from fmu_src.contact_laws import law_for
-
     index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
     levels = []
     for node in system.contacts:
@@ -318,8 +324,7 @@ class StabilityGuard:
         whatever the step; at high CR the same absolute error is a larger part of the little
         that is dissipated: the warning says so.)
         """
-        y = self.system.y
-        v = max(y.item(level.i_vimp), abs(y.item(level.iv1) - y.item(level.iv2)))
+        v = level.approach_speed(self.system.y)
         if v <= _V_FLOOR:                      # resting contact: no impact to resolve
             return None
         ratio = h * v / level.law.length_scale(v)
@@ -339,9 +344,7 @@ class StabilityGuard:
     def _advice(self, level: _Level | None, h: float) -> str:
         if level is None:
             return f"the communication step {h:.3g} s is too long for this scene; use a shorter step"
-        y = self.system.y
-        v = max(y.item(level.i_vimp), abs(y.item(level.iv1) - y.item(level.iv2)))
-        T = level.time_scale(v)
+        T = level.time_scale(level.approach_speed(self.system.y))
         step = 0.02 * T  # the plain law's dissipated-energy error is about h / T: 2 % (docs/accuracy.md)
         if level.resolved:
             return (f"the communication step {h:.3g} s is too long for the resolved impacts to hand their "

@@ -127,7 +127,7 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
         rollbacks=result.rollbacks,
         fmu_calls=result.fmu_calls,
         do_step_calls=sum(result.do_steps.values()),
-        warnings=warnings(contacts),
+        warnings=sampling_warnings(contacts),
     )
     return summary
 
@@ -136,8 +136,9 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
 SAMPLING_WARNING = 0.02
 
 
-def warnings(contacts: dict[str, dict[str, Any]]) -> list[str]:
-    """What a person must know before trusting the numbers of a run that completed."""
+def sampling_warnings(contacts: dict[str, dict[str, Any]]) -> list[str]:
+    """What a person must know before trusting the numbers of a run that completed: plain-law
+    contacts stepped too coarsely to resolve their impacts."""
     out = []
     for name, c in contacts.items():
         ratio = c.get("step_over_time_scale", 0.0)

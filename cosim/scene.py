@@ -297,26 +297,24 @@ class _Builder:
         contact_overrides: list[tuple[str, str, Any, str]] = []
         for instance, variable, value in parsed:
             text = f"{instance}.{variable}={value!r}" if instance else f"{variable}={value!r}"
+            # keyed by the table the errors name: top level, ground, buildings.<b>, pounding or a contact
+            self.overridden[(f"buildings.{instance}" if instance in buildings_raw else instance, variable)] = text
             if instance is None:
                 if variable not in ("name", "description", "stop_time", "step", "coupling"):
                     raise SceneError(f"--set {text}: unknown top-level key {variable!r} "
                                      f"(allowed: name, description, stop_time, step, coupling)")
                 raw[variable] = value
-                self.overridden[(None, variable)] = text
             elif instance == "ground":
                 if "ground" not in raw:
                     raise SceneError(f"--set {text}: {self.where} has no ground motion (no [ground] table)")
                 raw["ground"][variable] = value
-                self.overridden[("ground", variable)] = text
             elif instance in buildings_raw:
                 buildings_raw[instance][variable] = value
-                self.overridden[(f"buildings.{instance}", variable)] = text
             elif instance == "pounding":
                 if "pounding" not in raw or len(buildings_raw) < 2:
                     raise SceneError(f"--set {text}: {self.where} has no contact instance "
                                      f"(needs a [pounding] table and two buildings)")
                 raw["pounding"][variable] = value
-                self.overridden[("pounding", variable)] = text
             else:
                 contact_overrides.append((instance, variable, value, text))
 
@@ -371,7 +369,6 @@ class _Builder:
                                  f"(instances: {', '.join(names)})")
             if variable in POUNDING_MASTER_KEYS:
                 raise SceneError(f"--set {text}: {variable} applies to every level; use pounding.{variable}")
-            self.overridden[(instance, variable)] = text
             by_name[instance].parameters.update(self._flat_parameters({variable: value}, POUNDING, instance))
 
         # contact masses default to the floor masses at that level

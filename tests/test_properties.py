@@ -18,7 +18,11 @@ from fmu_src.impact import ImpactResolver, simulate_impact
 
 models = st.sampled_from(MODELS)
 restitution = st.floats(0.05, 1.0)
-log_uniform = lambda lo, hi: st.floats(math.log10(lo), math.log10(hi)).map(lambda e: 10.0 ** e)  # noqa: E731
+
+
+def log_uniform(lo: float, hi: float):
+    """Floats spread evenly over the decades from ``lo`` to ``hi``."""
+    return st.floats(math.log10(lo), math.log10(hi)).map(lambda e: 10.0 ** e)
 
 
 @settings(max_examples=400, deadline=None)
