@@ -10,7 +10,7 @@ relative speed ``v_imp`` [m/s] (the bundled ``single_impact`` scene, overridden 
 free masses and one ``pounding.fmu``).  The FMU parameter ``zeta`` is found by brentq
 so that the hysteresis-loop area ``int F d(delta)`` of that impact equals Goldsmith's
 kinetic-energy loss ``0.5 m (1 - CR^2) v_imp^2`` (seed Eq 3.2), ``m = m1 m2 / (m1 + m2)``.
-The physics-level root (:func:`fmu_src.impact.calibrate_zeta`, solve_ivp) gives the
+The physics-level root (:func:`fmu_src.single_impact.calibrate_zeta`, solve_ivp) gives the
 starting bracket, so the FMU root costs a handful of co-simulations, and it is an
 independent check: two integrators, one result.
 
@@ -49,9 +49,9 @@ if __package__ in (None, ""):  # run as a script: make the package importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.files import replaced_folder  # noqa: E402
-from fmu_src.contact_laws import (DAMPED_MODELS, MODELS, ContactLaw, crvk_printed_constant,  # noqa: E402
-                                  effective_mass, published_zeta)
-from fmu_src.impact import calibrate_zeta, goldsmith_loss, simulate_impact  # noqa: E402
+from fmu_src.contact_laws import (DAMPED_MODELS, MODELS, ContactLaw, effective_mass, law_spec,  # noqa: E402
+                                  published_zeta)
+from fmu_src.single_impact import calibrate_zeta, goldsmith_loss, simulate_impact  # noqa: E402
 
 SCENE = "single_impact"
 #: largest damping constant searched by default (CR(1e6) < 1e-4 for every model)
@@ -204,13 +204,13 @@ class FMURunner:
         """Run one impact of ``case`` with damping constant ``zeta`` (< 0: published formula).
 
         ``contact_duration`` [s] sets the communication step; default: from the physics
-        reference (:func:`fmu_src.impact.simulate_impact`).
+        reference (:func:`fmu_src.single_impact.simulate_impact`).
         """
         from cosim.run import run_scene
 
         if contact_duration is None:
             z = zeta if zeta >= 0.0 else published_zeta(case.model, case.CR, case.n)
-            contact_duration = simulate_impact(case.law(0.0 if case.model == "hertz" else z), case.v_imp,
+            contact_duration = simulate_impact(case.law(z if law_spec(case.model).damped else 0.0), case.v_imp,
                                                rtol=1e-8).contact_duration
         sets, h, stop = scene_overrides(case, zeta, contact_duration)
         t0 = time.perf_counter()
@@ -376,8 +376,9 @@ def calibrate(model: str, CR: float, *, m1: float, m2: float, k: float, v_imp: f
         lo = hi = 0.0
     # the paper's own formula for crvk is the printed Eq 3.9 constant (contact_laws' "published"
     # crvk value is already the exact calibration, which would compare the root with itself)
-    pub = crvk_printed_constant(CR) if model == "crvk" else published_zeta(model, CR, n)
-    pub_law_zeta = 0.0 if model == "hertz" else pub
+    spec = law_spec(model)
+    pub = spec.printed_constant(CR, n)
+    pub_law_zeta = pub if spec.damped else 0.0
     published_CR = _physics_cr(case, pub_law_zeta)
     impacts = 1
 
@@ -553,7 +554,7 @@ def calibrate_stiffness(model: str, peak_force: float, CR: float, *, m1: float, 
         if not (math.isfinite(zeta) and zeta >= 0.0):
             raise CalibrationError(f"zeta = {zeta!r} is outside the allowed range zeta >= 0")
         z = float(zeta)
-    if model == "hertz":
+    if not law_spec(model).damped:
         z = 0.0
     # F_peak = f1 * k^(1/(n+1)): one impact at k = 1 gives f1 (scale invariance).
     f1 = simulate_impact(probe.law(z), v_imp, rtol=1e-10).peak_force
@@ -600,8 +601,8 @@ def calibrate_stiffness(model: str, peak_force: float, CR: float, *, m1: float, 
 # outputs
 # ----------------------------------------------------------------------------------------------
 def reference_history(model: str, m: float, k: float, n: float, v_imp: float, zeta: float):
-    """Recorded solve_ivp impact (:class:`fmu_src.impact.ImpactResult` with histories)."""
-    return simulate_impact(ContactLaw(model, k, n, m, 0.0 if model == "hertz" else zeta), v_imp, record=True,
+    """Recorded solve_ivp impact (:class:`fmu_src.single_impact.ImpactResult` with histories)."""
+    return simulate_impact(ContactLaw(model, k, n, m, zeta if law_spec(model).damped else 0.0), v_imp, record=True,
                            rtol=1e-10)
 
 

@@ -60,12 +60,13 @@ from typing import Sequence
 
 import numpy as np
 
+from fmu_src.contact_laws import LAWS
+
 MATERIALS = ("JankowskiImpact", "Hertzdamp")
-#: our contact models each OpenSees material reproduces (see module docstring)
-MATERIAL_MODELS = {
-    "JankowskiImpact": ("jankowski", "barros2013"),
-    "Hertzdamp": ("hertzdamp", "ye", "naderpour2013", "hunt_crossley", "gonthier"),
-}
+#: our contact models each OpenSees material reproduces (see module docstring): the contact law
+#: table's ``opensees`` entries
+MATERIAL_MODELS = {material: tuple(name for name, spec in LAWS.items() if spec.opensees == material)
+                   for material in MATERIALS}
 FALLBACK_ALGORITHMS = ("Newton", "KrylovNewton", "NewtonLineSearch", "ModifiedNewton")
 _LIBRARIES = ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3", "liblapack.so.3")
 _ROOT = Path(__file__).resolve().parents[1]
@@ -210,7 +211,7 @@ def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time
     spec_contacts = []
     for c, contact in enumerate(contacts):
         law = contact.law
-        if law.model not in MATERIAL_MODELS[material]:
+        if law.spec.opensees != material:
             raise ValueError(f"contact {c}: OpenSees {material} reproduces the models "
                              f"{', '.join(MATERIAL_MODELS[material])}, not {law.model!r}")
         spec_contacts.append(dict(left=int(contact.left), left_floor=int(contact.left_floor),

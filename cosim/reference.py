@@ -69,8 +69,6 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
 OPEN, APPROACH, RESTITUTION = "open", "approach", "restitution"
-#: laws whose raw force can turn negative in restitution (clipped at 0: the bodies separate early)
-CLIPPED_MODELS = ("kelvin_voigt", "hertzdamp", "ye", "naderpour2013", "hunt_crossley", "gonthier")
 METHODS = ("DOP853", "Radau", "RK45", "BDF", "LSODA")
 
 
@@ -344,7 +342,7 @@ class _System:
             else:
                 out.append((_event(delta, -1), c, "separation"))
                 out.append((_event(rate, +1), c, "reapproach"))
-                if contact.law.model in CLIPPED_MODELS and contact.law.zeta > 0.0:
+                if contact.law.spec.clipped and contact.law.zeta > 0.0:   # the contact law table's rule
                     # the force reaches 0 (and is clipped) before delta does: separation
                     def raw(t, y, law=contact.law, i=i, j=j, gap=gap, v=float(v_imp[c])):
                         return law.raw_force(y[i] - y[j] - gap, y[n + i] - y[n + j], v, approaching=False)

@@ -6,7 +6,7 @@
 Writes ``report.md`` and one PNG per claim into ``--out`` (replaced as a whole: the folder
 is built under a temporary name and renamed when complete).  Every number is recomputed:
 
-* single impacts at the physics level (:func:`fmu_src.impact.simulate_impact`, solve_ivp at
+* single impacts at the physics level (:func:`fmu_src.single_impact.simulate_impact`, solve_ivp at
   tight tolerance) for the many-case figures (Fig 1, Fig 6 grids, sensitivities);
 * through the FMUs (:mod:`cosim.calibrate`: ``pounding.fmu`` between two free-mass
   ``building.fmu``) for the worked example, the calibrations the claims rest on and a subset
@@ -39,9 +39,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from cosim.calibrate import FMURunner, calibrate, calibrate_stiffness  # noqa: E402
 from cosim.files import replaced_folder  # noqa: E402
-from fmu_src.contact_laws import (DAMPED_MODELS, ContactLaw, crvk_printed_constant,  # noqa: E402
+from fmu_src.contact_laws import (DAMPED_MODELS, ContactLaw, law_spec, published_label,  # noqa: E402
                                   published_zeta)
-from fmu_src.impact import calibrate_zeta, goldsmith_loss, simulate_impact  # noqa: E402
+from fmu_src.single_impact import calibrate_zeta, goldsmith_loss, simulate_impact  # noqa: E402
 
 COMMAND = "python cosim/report.py --out docs/reproduction"
 
@@ -70,12 +70,14 @@ RECORDS = (("elcentro", "El Centro 1940"), ("kobe", "Kobe 1995"), ("sanfernando"
 FIG8_MODEL = "crvk"                        # the paper's proposed law, constant calibrated for each CR
 G = 9.80665                                # m/s^2
 
-#: Fig 1 / Fig 6 models plotted with their published constant (crvk: the printed Eq 3.9 constant)
-PUBLISHED_LABELS = {"kelvin_voigt": "Eq 2.3 Anagnostopoulos", "jankowski": "Eq 2.4 Jankowski",
-                    "barros2013": "Eq 2.5 Barros 2013", "hertzdamp": "Eq 2.6 Muthukumar-DesRoches",
-                    "ye": "Eq 2.7 Ye", "naderpour2013": "Eq 2.8 Naderpour 2013",
-                    "hunt_crossley": "Hunt-Crossley 1975", "gonthier": "Gonthier 2004",
-                    "crvk": "Eq 3.9 crvk (printed constant)"}
+#: Fig 1 / Fig 6 models plotted with their published constant (crvk: the printed Eq 3.9
+#: constant); the labels are the contact law table's (``LawSpec.label``)
+PUBLISHED_LABELS = {model: published_label(model) for model in DAMPED_MODELS}
+
+
+def printed_zeta(model: str, CR: float, n: float = 1.5) -> float:
+    """The damping constant as the seed paper prints it (the table's ``printed_constant``)."""
+    return law_spec(model).printed_constant(CR, n)
 
 
 @dataclass(frozen=True)
@@ -134,7 +136,7 @@ def _kN(F: float) -> str:
 
 
 def _law(model, k, n, m, zeta):
-    return ContactLaw(model, k, n, m, 0.0 if model == "hertz" else zeta)
+    return ContactLaw(model, k, n, m, zeta if law_spec(model).damped else 0.0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -148,7 +150,7 @@ def fig1(rep: Report) -> dict:
     elastic = simulate_impact(_law("hertz", WE_K, WE_N, m, 0.0), WE_V, record=True)
     rows = {}
     for ax, model in zip(axes.flat, models):
-        zp = crvk_printed_constant(WE_CR) if model == "crvk" else published_zeta(model, WE_CR, WE_N)
+        zp = printed_zeta(model, WE_CR, WE_N)
         zc = calibrate_zeta(model, WE_CR, WE_N).zeta   # scale invariant: m = k = v = 1 suffice
         pub = simulate_impact(_law(model, WE_K, WE_N, m, zp), WE_V, record=True)
         cal = simulate_impact(_law(model, WE_K, WE_N, m, zc), WE_V, record=True)
@@ -195,7 +197,7 @@ def fig1(rep: Report) -> dict:
 def fig5(rep: Report, runner: FMURunner, fig1_rows: dict) -> dict:
     m = WE_M1 * WE_M2 / (WE_M1 + WE_M2)
     cal = calibrate("crvk", WE_CR, m1=WE_M1, m2=WE_M2, k=WE_K, v_imp=WE_V, n=WE_N, runner=runner)
-    printed = crvk_printed_constant(WE_CR)
+    printed = printed_zeta("crvk", WE_CR, WE_N)
     case_printed = runner.impact(cal_case(WE_CR, WE_K), printed)
     ref = simulate_impact(_law("crvk", WE_K, WE_N, m, cal.zeta), WE_V, record=True)
     ref_p = simulate_impact(_law("crvk", WE_K, WE_N, m, printed), WE_V, record=True)
@@ -282,7 +284,7 @@ def fig6(rep: Report, runner: FMURunner) -> dict:
     published = {}
     for model in DAMPED_MODELS:
         n = 1.0 if model == "kelvin_voigt" else 1.5      # Eq 2.3 was derived for the linear law
-        zs = [crvk_printed_constant(c) if model == "crvk" else published_zeta(model, c, n) for c in crs]
+        zs = [printed_zeta(model, c, n) for c in crs]
         published[model] = np.array([simulate_impact(ContactLaw(model, 1.0, n, 1.0, z), 1.0, rtol=1e-9).achieved_CR
                                      for z in zs])
     calibrated = {}

@@ -15,7 +15,7 @@ import pytest
 from cosim.calibrate import (CalibrationError, FMURunner, ImpactCase, _fmu_root, calibrate, calibrate_stiffness,
                              main, write_outputs)
 from fmu_src.contact_laws import DAMPED_MODELS, ContactLaw
-from fmu_src.impact import goldsmith_loss, simulate_impact
+from fmu_src.single_impact import goldsmith_loss, simulate_impact
 
 # Issue 5 acceptance: CR within 0.002 and loop area within 0.1 % of Goldsmith's loss.
 CR_TOL = 0.002

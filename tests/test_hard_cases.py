@@ -26,7 +26,7 @@ from cosim.master import System, simulate
 from cosim.reference import reference_for_scene
 from cosim.scene import load_scene
 from fmu_src.contact_laws import law_for
-from fmu_src.impact import simulate_impact
+from fmu_src.single_impact import simulate_impact
 from scenario_checks import simulate_scene as run
 
 
@@ -148,7 +148,7 @@ def test_step_ten_times_the_contact_duration(catalog):
     approach-only damping shortens it (solve_ivp: 0.353 ms)."""
     from scipy.special import beta
 
-    from fmu_src.impact import goldsmith_loss
+    from fmu_src.single_impact import goldsmith_loss
 
     m, k, n, v, CR = 100.0, 1.8974e11, 1.5, 10.0, 0.4     # effective mass of 200 kg + 200 kg
     delta_max = ((n + 1.0) * m * v * v / (2.0 * k)) ** (1.0 / (n + 1.0))
