@@ -33,9 +33,9 @@ def main(argv=None) -> int:
     parser.add_argument("--profile", action="store_true", help="profile the default scene")
     args = parser.parse_args(argv)
     if args.fmu_dir is None:
-        from build_fmu import DEFAULT_OUT, build_all
-        build_all(DEFAULT_OUT)
-        args.fmu_dir = DEFAULT_OUT
+        from cosim.fmus import default_fmu_dir
+
+        args.fmu_dir = default_fmu_dir()
     print(f"{'scene':<16}{'steps':>7}{'instances':>10}{'first run s':>13}{'best s':>9}{'us/step':>9}{'FMI calls':>11}")
     with Catalog(args.fmu_dir) as catalog:
         for name in SCENES:

@@ -33,7 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from build_fmu import build_all  # noqa: E402
+from cosim.fmus import build_all  # noqa: E402
 from cosim.study import load_study, read_results, run_study  # noqa: E402
 
 

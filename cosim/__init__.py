@@ -6,6 +6,13 @@ calls FMI functions), :mod:`cosim.scene` (scene files), :mod:`cosim.master`
 :mod:`cosim.results` (summary, CSV, plots), :mod:`cosim.run` (CLI and
 :func:`run_scene`).
 """
+from importlib.metadata import PackageNotFoundError, version as _version
+
+try:
+    __version__ = _version("pounding-cosim")   # single source: pyproject.toml
+except PackageNotFoundError:   # a source tree that was never installed
+    __version__ = "0+unknown"
+
 from .coupling import STRATEGIES, CouplingStrategy, GaussSeidel, Jacobi, get_strategy
 from .fmi import FMU, FMUError, Instance
 from .master import Catalog, SimulationResult, System, simulate

@@ -56,10 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     """Print the variable tables of every FMU; exit code 0, or 2 if an FMU file is missing."""
     import argparse
 
-    root = Path(__file__).resolve().parents[1]
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    from build_fmu import DEFAULT_OUT, FMUS, build_all
+    from cosim.fmus import FMUS, build_all, fmu_folder
 
     parser = argparse.ArgumentParser(
         prog="python -m cosim.fmu_docs",
@@ -71,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     folder = args.fmu_dir
     if folder is None:
-        folder = DEFAULT_OUT
+        folder = fmu_folder()
         build_all(folder)
     missing = [f"{spec.name}.fmu" for spec in FMUS if not (folder / f"{spec.name}.fmu").is_file()]
     if missing:

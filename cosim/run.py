@@ -49,14 +49,7 @@ class RunResult:
     folder: Path | None
 
 
-def default_fmu_dir() -> Path:
-    """``build/fmus``, built or refreshed from the current sources when needed."""
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
-    from build_fmu import DEFAULT_OUT, build_all
-
-    build_all(DEFAULT_OUT)
-    return DEFAULT_OUT
+from cosim.fmus import default_fmu_dir  # noqa: E402,F401  (moved: the library builds FMUs)
 
 
 def run_scene(scene: str | Path | dict = DEFAULT_SCENE, overrides: Sequence[str] = (), *,

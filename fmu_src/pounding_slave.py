@@ -15,10 +15,10 @@ See docs/contact_models.md for the models and the in-step rules.
 """
 from __future__ import annotations
 
-from fmu_src.contact_laws import MODELS, law_for
-from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, Variable
-from fmu_src.plain_contact import PlainContact
-from fmu_src.resolver import ImpactResolver
+from .contact_laws import MODELS, law_for
+from .fmi_slave import SlaveBase as Fmi2Slave, Variable
+from .plain_contact import PlainContact
+from .resolver import ImpactResolver
 
 _OUT = dict(causality="output")
 

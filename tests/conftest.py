@@ -14,7 +14,7 @@ if str(ROOT) not in sys.path:
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory) -> Path:
     """Folder holding every FMU, built from the current sources for this session."""
-    from build_fmu import build_all
+    from cosim.fmus import build_all
 
     out = tmp_path_factory.mktemp("fmus")
     build_all(out)

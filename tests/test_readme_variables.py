@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from build_fmu import FMUS
+from cosim.fmus import FMUS
 from cosim.fmu_docs import markdown_table
 
 README = Path(__file__).resolve().parents[1] / "README.md"
