@@ -20,8 +20,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.master import Catalog, System, simulate  # noqa: E402
-from cosim.scene import load_scene  # noqa: E402
+from cosim.master.simulate import simulate
+from cosim.master.system import Catalog, System  # noqa: E402
+from cosim.master.loader import load_scene  # noqa: E402
 
 SCENES = ("default", "single_impact", "free_vibration", "one_building", "kasai_maison")
 
@@ -44,11 +45,11 @@ def main(argv=None) -> int:
                 times = []
                 for _ in range(args.repeat):
                     result = simulate(system, progress=False)
-                    times.append(result.wall_time_s)
+                    times.append(result.cost.wall_time_s)
                 best = min(times)
-                n = result.communication_steps
+                n = result.cost.communication_steps
                 print(f"{name:<16}{n:>7}{len(system.nodes):>10}{times[0]:>13.3f}{best:>9.3f}"
-                      f"{1e6 * best / n:>9.1f}{result.fmu_calls:>11}")
+                      f"{1e6 * best / n:>9.1f}{result.cost.fmu_calls:>11}")
                 if args.profile and name == "default":
                     profiler = cProfile.Profile()
                     profiler.enable()
@@ -63,6 +64,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from cosim.fmi import exit_process
+    from cosim.master.fmi import exit_process
 
     exit_process(main())

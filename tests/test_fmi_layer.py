@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.fmi import FMU, FMUError
+from cosim.master.fmi import FMU, FMUError
 
 
 @pytest.fixture(scope="module")

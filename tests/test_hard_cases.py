@@ -21,10 +21,11 @@ import math
 import numpy as np
 import pytest
 
-from cosim.adaptive import InstabilityError
-from cosim.master import System, simulate
-from cosim.reference import reference_for_scene
-from cosim.scene import load_scene
+from cosim.master.guard import InstabilityError
+from cosim.master.simulate import simulate
+from cosim.master.system import System
+from cosim.peers.reference import reference_for_scene
+from cosim.master.loader import load_scene
 from fmu_src.contact_laws import law_for
 from fmu_src.single_impact import simulate_impact
 from scenario_checks import simulate_scene as run
@@ -309,7 +310,7 @@ def test_300_second_run_has_no_energy_drift(catalog, resolve):
     with System(loaded, catalog) as system:
         result = simulate(system, progress=False)
     check_physical(result)
-    from cosim.results import energy_history
+    from cosim.master.results import energy_history
 
     e = energy_history(result)
     scale = float(np.max(np.abs(e["input"])))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from cosim.reference import Contact, solve_reference
+from cosim.peers.reference import Contact, solve_reference
 from fmu_src.contact_laws import law_for
 from fmu_src.ground_records import Record
 from fmu_src.single_impact import simulate_impact
@@ -192,8 +192,8 @@ def test_bad_input_is_named():
 def test_reference_for_scene_single_impact():
     """The scene adapter builds the FMUs' physics from scene values and FMU start values: the
     seed's worked example (crvk, CR = 0.4, calibrated) loses exactly Goldsmith's 4200 J."""
-    from cosim.reference import reference_for_scene
-    from cosim.scene import load_scene
+    from cosim.peers.reference import reference_for_scene
+    from cosim.master.loader import load_scene
     from fmu_src.single_impact import goldsmith_loss
 
     scene = load_scene({

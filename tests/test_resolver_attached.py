@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from cosim.reference import Contact, solve_reference
+from cosim.peers.reference import Contact, solve_reference
 from fmu_src.contact_laws import law_for
 from fmu_src.resolver import ImpactResolver
 from fmu_src.single_impact import simulate_impact
