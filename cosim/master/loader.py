@@ -20,7 +20,7 @@ from typing import Any, Mapping, Sequence
 from ..fmus import BUILDING, GROUND, POUNDING
 from .coupling import COUPLINGS
 from .interface import FmuInterface, interfaces, parameter_defaults
-from .names import element, element_name
+from .names import base_name, element, element_name
 from .scene import SCENES, ContactLevel, InstanceSpec, Override, Scene, SceneError, as_override
 
 TOP_LEVEL = ("name", "description", "stop_time", "step", "coupling", "ground", "buildings", "pounding")
@@ -84,7 +84,7 @@ class _Builder:
     # -- errors --------------------------------------------------------------------------------
     def error(self, message: str, key: str | None = None, table: str | None = None) -> SceneError:
         # an element's own override, else one that set the whole array
-        override = (self.overridden.get((table, key)) or self.overridden.get((table, key.split("[", 1)[0]))
+        override = (self.overridden.get((table, key)) or self.overridden.get((table, base_name(key)))
                     if key else None)
         if override:
             return SceneError(f"--set {override}: {message}")
@@ -95,7 +95,7 @@ class _Builder:
     def _line_of(self, key: str, table: str | None) -> int | None:
         if not self.text:
             return None
-        base = re.escape(key.split("[", 1)[0])
+        base = re.escape(base_name(key))
         in_table = table is None
         header = f"[{table}]" if table else None
         for number, line in enumerate(self.text.splitlines(), 1):

@@ -70,7 +70,7 @@ from pathlib import Path
 from typing import Any
 
 from .interface import FmuInterface, declared_interface, parameter_defaults
-from .names import element_name
+from .names import base_name, element_name
 
 #: the bundled scenes (package data)
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
@@ -95,7 +95,7 @@ class Override:
     @classmethod
     def of(cls, target: str, value: Any) -> "Override":
         """``Override.of("left.m[1]", 2e5)``, ``Override.of("stop_time", 5.0)``."""
-        if "." in target.split("[", 1)[0]:
+        if "." in base_name(target):
             instance, variable = target.split(".", 1)
         else:
             instance, variable = None, target

@@ -369,9 +369,13 @@ def _child_main(request: str, answer: str) -> None:
     os._exit(0)
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":   # the child process of _in_child (a protocol, not a command line)
     import sys
 
+    if len(sys.argv) != 3 or sys.argv[1].startswith("-"):
+        print("usage: python -m cosim.peers.libcosim REQUEST.pkl ANSWER.pkl  (the child process of "
+              "cosim.peers.libcosim.run_system / run_ssp; not a command)", file=sys.stderr)
+        sys.exit(2)
     # import by package name so that the pickled result refers to cosim.peers.libcosim
     from cosim.peers.libcosim import _child_main as _main
 

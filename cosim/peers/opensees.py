@@ -58,7 +58,7 @@ from typing import Sequence
 
 import numpy as np
 
-from fmu_src.contact_laws import LAWS
+from fmu_src.contact_laws import LAWS, law_spec
 
 from .opensees_worker import opensees_library_dir
 from .reference import reference_for_scene, scene_inputs
@@ -71,6 +71,16 @@ MATERIALS = ("JankowskiImpact", "Hertzdamp")
 #: table's ``opensees`` entries
 MATERIAL_MODELS = {material: tuple(name for name, spec in LAWS.items() if spec.opensees == material)
                    for material in MATERIALS}
+
+
+def material_for(model: str) -> str:
+    """The OpenSees material that reproduces contact law ``model`` (the table's ``opensees``);
+    ValueError for an unknown name or a law OpenSees has no equivalent of."""
+    material = law_spec(model).opensees
+    if material is None:
+        have = [name for name, spec in LAWS.items() if spec.opensees]
+        raise ValueError(f"model = {model!r} has no OpenSees equivalent; laws that have one: {', '.join(have)}")
+    return material
 
 
 # -- locating and loading openseespy ------------------------------------------------------------
@@ -255,11 +265,17 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
         subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"])
 
 
-def opensees_for_scene(scene, dt: float, material: str = "JankowskiImpact", overrides: dict | None = None,
+def opensees_for_scene(scene, dt: float, material: str | None = None, overrides: dict | None = None,
                        **options) -> PeerResult:
-    """:func:`run_opensees` on a :class:`cosim.master.scene.Scene` (inputs as the reference builds them)."""
+    """:func:`run_opensees` on a :class:`cosim.master.scene.Scene` (inputs as the reference builds them);
+    ``material`` default: the one of the scene's contact law (:func:`material_for`)."""
     inputs = scene_inputs(scene)
     inputs.update(overrides or {})
+    if material is None:
+        materials = {material_for(c.law.model) for c in inputs["contacts"]} or {MATERIALS[0]}
+        if len(materials) > 1:
+            raise ValueError(f"the scene's contacts need several OpenSees materials {sorted(materials)}: give one")
+        material = materials.pop()
     return run_opensees(inputs["buildings"], inputs["ground"], inputs["contacts"], inputs["stop_time"], dt,
                         inputs.get("x0"), inputs.get("v0"), material, **options)
 
