@@ -9,13 +9,22 @@ Per doStep ``[t, t + h]`` the outputs are exact for the piecewise-linear record 
 its first and after its last sample): ``ag`` at ``t + h``, ``ag_mean`` the mean over the step
 (what a zero-order-hold building needs: its velocity increments are then exact), the ground
 velocity ``vg`` and displacement ``dg`` at ``t + h``.
+
+Knots (``n_knots``, ``t_knot[k]``, ``ag_knot[k]``, k = 1..KNOT_CAPACITY): the record over the
+last step ``[t, t + h]`` exactly, as the polyline through ``(t, ag(t+))``, every sample strictly
+inside and ``(t + h, ag(t + h-))`` (a jump where the record starts or ends is two knots at one
+time; ``fmu_src/record_knots.py``).  A building fed these knots integrates the record exactly
+over any step length.  A step that needs more than KNOT_CAPACITY knots still succeeds and sets
+``n_knots = 0``: use ``ag_mean`` for it.  Elements beyond ``n_knots`` are 0; before the first
+step ``n_knots = 0``.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
+from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
 from fmu_src.ground_records import FORMATS, UNITS, load_record
+from fmu_src.record_knots import KNOT_CAPACITY, step_knots
 
 
 class GroundMotion(Fmi2Slave):
@@ -42,6 +51,13 @@ class GroundMotion(Fmi2Slave):
         Variable("duration", causality="output", unit="s", description="record length (npts - 1) dt"),
         Variable("t_end", causality="output", unit="s",
                  description="time of the last sample (time_shift + duration); zero motion afterwards"),
+        Variable("n_knots", "Integer", causality="output", start=0,
+                 description=f"knots of the last step in t_knot/ag_knot (2..{KNOT_CAPACITY}); 0 = none "
+                             f"(before the first step, or a step spanning more record samples: use ag_mean)"),
+        *array("t_knot", KNOT_CAPACITY, causality="output", unit="s",
+               description="time of a knot of the record over the last step [t, t+h] (first t, last t+h)"),
+        *array("ag_knot", KNOT_CAPACITY, causality="output", unit="m/s2",
+               description="ground acceleration at the knot (the record is linear between knots)"),
     )
 
     def __init__(self, **kwargs):
@@ -67,6 +83,9 @@ class GroundMotion(Fmi2Slave):
         self.ag = self.ag_mean = record.at(t)
         self.vg = record.velocity(t)
         self.dg = record.displacement(t)
+        self.n_knots = 0
+        self.t_knot[:] = 0.0
+        self.ag_knot[:] = 0.0
 
     def _records_dir(self) -> Path | None:
         """This FMU's own bundled records (``resources/fmu_src/records``), if it has them."""
@@ -83,3 +102,18 @@ class GroundMotion(Fmi2Slave):
         self.ag_mean = record.mean_over(current_time, t1)
         self.vg = record.velocity(t1)
         self.dg = record.displacement(t1)
+        knots = step_knots(record, current_time, t1, KNOT_CAPACITY)
+        if knots is None:
+            if self.n_knots:
+                self.t_knot[:] = 0.0
+                self.ag_knot[:] = 0.0
+            self.n_knots = 0
+        else:
+            times, values = knots
+            count = times.size
+            self.t_knot[:count] = times
+            self.ag_knot[:count] = values
+            if count < self.n_knots:
+                self.t_knot[count:self.n_knots] = 0.0
+                self.ag_knot[count:self.n_knots] = 0.0
+            self.n_knots = count
