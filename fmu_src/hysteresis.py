@@ -142,10 +142,10 @@ class StoreyHysteresis:
                 out.append(f"bw_beta = {b!r}, bw_gamma = {g!r}: must be finite")
             else:
                 if not b + g > 0.0:
-                    out.append(f"bw_beta + bw_gamma = {b + g!r} is outside the allowed range bw_beta + bw_gamma > 0 "
+                    out.append(f"bw_beta + bw_gamma = {b + g:.6g} is outside the allowed range bw_beta + bw_gamma > 0 "
                                f"(unbounded hysteretic force otherwise)")
                 if not b - g >= 0.0:
-                    out.append(f"bw_beta - bw_gamma = {b - g!r} is outside the allowed range bw_beta - bw_gamma >= 0 "
+                    out.append(f"bw_beta - bw_gamma = {b - g:.6g} is outside the allowed range bw_beta - bw_gamma >= 0 "
                                f"(negative dissipation on some loading paths otherwise)")
         if out or initial_drifts is None:
             return out
