@@ -31,7 +31,7 @@ class FmuSpec:
 
 FMUS = (
     FmuSpec("pounding", "pounding_slave.py", "contact element: spring + dashpot impact laws"),
-    FmuSpec("building", "building_slave.py", "linear shear building, 1 to 20 storeys"),
+    FmuSpec("building", "building_slave.py", "shear building, 1 to 20 storeys, linear or yielding storeys"),
     FmuSpec("ground_motion", "ground_motion_slave.py", "plays a recorded ground acceleration"),
 )
 

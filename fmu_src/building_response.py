@@ -72,7 +72,8 @@ class BuildingState:
 
     ``u``, ``v`` floor displacements (m) and velocities (m/s) relative to the ground;
     ``slip`` (m) and ``mode`` (0, +1, -1) the bilinear storeys' state; ``z`` (-) the Bouc-Wen
-    variable; ``peaks`` the running peaks ``[|x| (m), |drift| (m), |a| (m/s^2)]`` (3n, also
+    variable and ``rk_step`` (s) its integrator's step (part of the state, so that a restored
+    state replays bit for bit); ``peaks`` the running peaks ``[|x| (m), |drift| (m), |a| (m/s^2)]`` (3n, also
     as views ``peak_x``, ``peak_drift``, ``peak_accel``); energies (J) accumulated from the start.
     """
 
@@ -86,6 +87,7 @@ class BuildingState:
     E_external: float = 0.0
     E_damping: float = 0.0
     E_hysteretic: float = 0.0
+    rk_step: float = 0.0      # Bouc-Wen: the last accepted Runge-Kutta step (s), the next first guess
 
     @property
     def peak_x(self) -> np.ndarray:
@@ -309,7 +311,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if ag1 != 0.0:
                     bound += abs(ag1) * smap.ramp_change
                 watched[2 * n:3 * n] += p / self.masses
-                peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks + self._peak_atol
+                # strict (no tolerance): a segment cleared here records no end value
+                peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
                 if inelastic:
                     e0 = watched[n:2 * n] - state.slip
                     reach = bound[n:2 * n]
@@ -498,7 +501,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         re, im = start_values[:2 * n], start_values[2 * n:4 * n]
         bound = change @ np.sqrt(re * re + im * im)
-        flags = np.abs(start_values[4 * n:]) + bound > state.peaks + self._peak_atol
+        flags = np.abs(start_values[4 * n:]) + bound > state.peaks    # strict, see _interval
         if not flags.any():
             cost.cleared += 1
             return
@@ -530,7 +533,6 @@ class BoucWenRK(BuildingIntegrator):
         energy = float(np.sum(self.fy * dy))
         self.atol = np.concatenate([np.full(n, scale_u), np.full(n, scale_u * w1), np.ones(n),
                                     np.full(3, energy)]) * self.rtol
-        self._first_step = None
         # q = P y: drifts, drift rates, C v and 1'M v in one product
         D = np.eye(n) - np.eye(n, k=-1)
         P = np.zeros((3 * n + 1, 3 * n + 3))
@@ -610,7 +612,7 @@ class BoucWenRK(BuildingIntegrator):
             slope = (ag[j + 1] - ag[j]) / length
             fun = self._rhs(float(ag[j]), float(slope), force)
             solver = DOP853(fun, 0.0, y, length, rtol=self.rtol, atol=self.atol,
-                            first_step=min(self._first_step, length) if self._first_step else None)
+                            first_step=min(state.rk_step, length) if state.rk_step > 0.0 else None)
             f_old = solver.f
             vals_old, rates_old = self._peak_values(y, f_old, force)
             while solver.status == "running":
@@ -636,7 +638,7 @@ class BoucWenRK(BuildingIntegrator):
                         peaks[i] = max(peaks[i], value)
                 vals_old, rates_old = vals_new, rates_new
                 if solver.step_size is not None and solver.status == "running":
-                    self._first_step = solver.step_size
+                    state.rk_step = float(solver.step_size)
             cost.rhs_evaluations += solver.nfev
             y = solver.y.copy()
         state.u = y[:n].copy()

@@ -155,7 +155,7 @@ class StoreyHysteresis:
         for i in range(n):
             inside = abs(d0[i]) <= limit[i] if self.model == "bilinear" else abs(d0[i]) < limit[i]
             if not inside:
-                out.append(f"the initial drift of storey {i + 1} (x0) is {d0[i]!r} m, beyond its yield drift "
+                out.append(f"the initial drift of storey {i + 1} (x0) is {float(d0[i])!r} m, beyond its yield drift "
                            f"Fy[{i + 1}] / k[{i + 1}] = {dy[i]:.6g} m: the initial state must be elastic")
         return out
 
