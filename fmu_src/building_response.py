@@ -120,13 +120,6 @@ class StepCost:
     event_log: list = field(default_factory=list)   # (time in the step (s), storey index, kind)
 
 
-def _modal_amplitude(scan_vector: np.ndarray, n: int) -> np.ndarray:
-    """``|W z'(0)|`` from the tail ``[Re; Im]`` of a scan vector."""
-    re = scan_vector[-4 * n:-2 * n]
-    im = scan_vector[-2 * n:]
-    return np.sqrt(re * re + im * im)
-
-
 def _drift(u: np.ndarray) -> np.ndarray:
     d = u.copy()
     d[1:] -= u[:-1]
@@ -176,6 +169,17 @@ class BuildingIntegrator:
         """``M^-1 (f - C v - D' V)`` (m/s^2)."""
         return (np.asarray(force, float) - self.C @ state.v - _floor_forces(self.storey_shear(state))) / self.masses
 
+    def response(self, state: BuildingState, force):
+        """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes)."""
+        d = _drift(state.u)
+        V, strain = self._shear_and_strain(state, d)
+        a = (force - self.C @ state.v - _floor_forces(V)) / self.masses
+        return d, V, a, strain
+
+    def _shear_and_strain(self, state, d):
+        # the strain energy as ShearBuilding.strain_energy writes it (the linear model, bit for bit)
+        return self.k * d, 0.5 * float(self.k @ (d * d))
+
     def initial_state(self, u0, v0, force=None) -> BuildingState:
         """The elastic initial state at ``(u0, v0)``; peaks start from its values."""
         n = self.n
@@ -206,6 +210,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
+        self._inv_m = 1.0 / self.masses
 
     # -- bilinear storey state -----------------------------------------------------------------
     def storey_shear(self, state):
@@ -220,8 +225,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             return super().strain_energy(state)
         return bilinear_strain_energy(self.k, self.alpha, _drift(state.u), state.slip, state.mode, self.fy)
 
+    def _shear_and_strain(self, state, d):
+        if not self.hysteresis.inelastic:
+            return super()._shear_and_strain(state, d)
+        q = bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip, state.mode)
+        hard = self.alpha * self.k * d
+        strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / ((1.0 - self.alpha) * self.k)))
+        return hard + q, strain
+
     def configuration(self, mode: np.ndarray) -> Configuration:
         """The linear system of a yield pattern (cached; Rayleigh/modal C stays the initial one)."""
+        if not self.hysteresis.inelastic and self._configs:
+            return next(iter(self._configs.values()))     # a linear building has one
         key = (mode != 0).tobytes()
         cfg = self._configs.get(key)
         if cfg is None:
@@ -307,10 +322,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # tier 1: how far can every watched function move in this segment?
             peak_flags = unload_flags = up_flags = down_flags = None
             if change is not None:
-                bound = change @ _modal_amplitude(scan_vector, n)
+                bound = change @ np.abs(scan_vector[-4 * n:])
                 if ag1 != 0.0:
                     bound += abs(ag1) * smap.ramp_change
-                watched[2 * n:3 * n] += p / self.masses
+                watched[2 * n:3 * n] += p * self._inv_m
                 # strict (no tolerance): a segment cleared here records no end value
                 peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
                 if inelastic:
@@ -390,99 +405,98 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
         Events: an elastic storey whose plastic element reaches its strength (``|d - s| = dy``;
         kind = the direction) and a yielding storey whose drift velocity changes sign (kind 0).
-        Tier 2 (Hermite, on the drift rows of the scan) narrows the candidates of tier 1; the
-        rest are searched one by one (:func:`first_root`) up to the earliest event found so far.
+        Tier 2 (cubic Hermite through the drift rows of the scan, with the bound of the fourth
+        or fifth derivative) narrows the candidates of tier 1; the rest are searched one by one
+        (:func:`first_root`) up to the earliest event found so far.
         """
         n = self.n
-        G, B = scan.G[n:2 * n], scan.B[n:2 * n]      # the drift rows
-        w4 = rem ** 4 / 384.0
         mode = state.mode
-        elastic = mode == 0
-        # elastic: e = d - s must stay inside [-dy, dy]; the cubic Hermite deviates from the
-        # chord by at most a quarter of the larger end-slope mismatch
-        e0 = G[:, 0] - state.slip
-        e1 = G[:, 1] - state.slip
-        chord = e1 - e0
-        dev = 0.25 * np.maximum(np.abs(rem * G[:, 2] - chord), np.abs(rem * G[:, 3] - chord)) + B[:, 0] * w4
-        up = elastic & (np.maximum(e0, e1) + dev >= self.dy)
-        down = elastic & (np.minimum(e0, e1) - dev <= -self.dy)
-        # yielding: r = mode d' must stay > 0
-        r0 = mode * G[:, 2]
-        r1 = mode * G[:, 3]
-        chord = r1 - r0
-        dev_r = 0.25 * np.maximum(np.abs(rem * mode * G[:, 4] - chord), np.abs(rem * mode * G[:, 5] - chord))
-        unload = ~elastic & (np.minimum(r0, r1) - dev_r - B[:, 1] * w4 <= 0.0)
-        if up_flags is not None:
-            up &= up_flags
-            down &= down_flags
-            unload &= unload_flags
-        candidates = np.flatnonzero(up | down | unload)
-        if candidates.size == 0:
+        if up_flags is None:
+            elastic = mode == 0
+            up_flags = down_flags = elastic
+            unload_flags = ~elastic
+        w4 = rem ** 4 / 384.0
+        G, B = scan.G, scan.B
+        candidates = []
+        for i in np.flatnonzero(up_flags | down_flags | unload_flags):
+            r = n + i                                   # the drift row of storey i
+            if mode[i] == 0:
+                s = state.slip[i]
+                lo, hi = hermite_range_scalar(G[r, 0] - s, G[r, 1] - s, rem * G[r, 2], rem * G[r, 3])
+                err = B[r, 0] * w4
+                if up_flags[i] and hi + err >= self.dy[i]:
+                    candidates.append((i, +1))
+                if down_flags[i] and lo - err <= -self.dy[i]:
+                    candidates.append((i, -1))
+            elif unload_flags[i]:
+                sg = float(mode[i])
+                lo, _ = hermite_range_scalar(sg * G[r, 2], sg * G[r, 3], rem * sg * G[r, 4], rem * sg * G[r, 5])
+                if lo - B[r, 1] * w4 <= 0.0:
+                    candidates.append((i, 0))
+        if not candidates:
             return None
         segment = ModalSegment(cfg, y[:2 * n], y[2 * n:])
         best = None
         D = self._drift_rows
-        for i in candidates:
-            for kind, flagged in ((+1, up[i]), (-1, down[i]), (0, unload[i])):
-                if not flagged:
-                    continue
-                row = np.zeros(2 * n)
-                if kind == 0:
-                    row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
-                    offset = 0.0
-                else:
-                    row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
-                    offset = self.dy[i] + kind * state.slip[i]
-                c_modal = row @ cfg.V
-                horizon = rem if best is None else best[0]
-                if horizon <= 0.0:
-                    return best
-                cost.root_searches += 1
-                t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
-                if t is not None and (best is None or t < best[0]):
-                    best = (t, int(i), kind)
+        for i, kind in candidates:
+            row = np.zeros(2 * n)
+            if kind == 0:
+                row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
+                offset = 0.0
+            else:
+                row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
+                offset = self.dy[i] + kind * state.slip[i]
+            c_modal = row @ cfg.V
+            horizon = rem if best is None else best[0]
+            if horizon <= 0.0:
+                return best
+            cost.root_searches += 1
+            t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
+            if t is not None and (best is None or t < best[0]):
+                best = (t, int(i), kind)
         return best
 
     # -- peaks --------------------------------------------------------------------------------
     def _peaks(self, cfg, scan, segment, state, y, p, length, xtol, cost, flags=None):
-        """Update the running peaks of |x|, |drift|, |a| over a segment of the exact solution."""
+        """Update the running peaks of |x|, |drift|, |a| over a segment of the exact solution.
+
+        The end values are recorded; the functions that tier 1 (``flags``; all if None) could
+        not clear are tested by the cubic Hermite bound and, where a new peak remains possible,
+        searched (:func:`max_abs`).
+        """
         n = self.n
         G, B = scan.G, scan.B
-        g0 = G[:, 0].copy()
         g1 = G[:, 1].copy()
-        accel_offset = p / self.masses
-        g0[2 * n:] += accel_offset
+        accel_offset = p * self._inv_m
         g1[2 * n:] += accel_offset
-        ends = np.maximum(np.abs(g0), np.abs(g1))
-        new = np.maximum(state.peaks, ends)
+        new = np.maximum(state.peaks, np.abs(g1))
         w4 = length ** 4 / 384.0
-        chord = g1 - g0
-        dev = 0.25 * np.maximum(np.abs(length * G[:, 2] - chord), np.abs(length * G[:, 3] - chord))
-        possible = ends + dev + B[:, 0] * w4 > new + self._peak_atol
-        if flags is not None:
-            possible &= flags
-        if possible.any():
-            # a function whose slope provably keeps its sign has its extremes at the ends
-            chord = G[:, 3] - G[:, 2]
-            dev_s = 0.25 * np.maximum(np.abs(length * G[:, 4] - chord), np.abs(length * G[:, 5] - chord))
-            monotonic = (G[:, 2] * G[:, 3] > 0.0) & (
-                np.minimum(np.abs(G[:, 2]), np.abs(G[:, 3])) - dev_s - B[:, 1] * w4 > 0.0)
-            for j in np.flatnonzero(possible & ~monotonic):
-                lo, hi = hermite_range_scalar(g0[j], g1[j], length * G[j, 2], length * G[j, 3])
-                if max(-lo, hi) + B[j, 0] * w4 <= new[j] + self._peak_atol[j]:
+        candidates = range(3 * n) if flags is None else np.flatnonzero(flags)
+        for j in candidates:
+            offset = accel_offset[j - 2 * n] if j >= 2 * n else 0.0
+            g0 = G[j, 0] + offset
+            s0, s1 = G[j, 2], G[j, 3]
+            if s0 * s1 > 0.0:
+                # a slope that provably keeps its sign puts the extremes at the ends
+                lo, hi = hermite_range_scalar(s0, s1, length * G[j, 4], length * G[j, 5])
+                err = B[j, 1] * w4
+                if lo - err > 0.0 or hi + err < 0.0:
                     continue
-                segment = segment or ModalSegment(cfg, y[:2 * n], y[2 * n:])
-                cost.peak_searches += 1
-                offset = accel_offset[j - 2 * n] if j >= 2 * n else 0.0
-                new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,
-                                    min_width=xtol, budget=_ROOT_BUDGET, atol=self._peak_atol[j])
+            lo, hi = hermite_range_scalar(g0, g1[j], length * s0, length * s1)
+            if max(-lo, hi) + B[j, 0] * w4 <= new[j] + self._peak_atol[j]:
+                continue
+            segment = segment or ModalSegment(cfg, y[:2 * n], y[2 * n:])
+            cost.peak_searches += 1
+            new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,
+                                min_width=xtol, budget=_ROOT_BUDGET, atol=self._peak_atol[j])
         state.peaks = new
 
     # -- the linear zero-order-hold step computed elsewhere (building_slave) -------------------
     def legacy_rows(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For a zero-order-hold step ``h`` of the elastic building acting on ``y = [u0; v0; ag; f]``:
         ``(start, scan, change)``: ``start @ y = [Re W z'(0); Im W z'(0); watched functions at 0
-        (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector and ``change`` the tier-1 bound."""
+        (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector and ``change`` the tier-1 bound
+        acting on ``|Re| + |Im|`` (an upper bound of the modal amplitude)."""
         cfg = self.configuration(np.zeros(self.n, dtype=np.int64))
         smap = cfg.segment_map(h)
         n = self.n
@@ -491,7 +505,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
         watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)
         start = np.ascontiguousarray(np.vstack([scan[-4 * n:], watch[:3 * n]]))
-        return start, np.ascontiguousarray(scan), smap.change[:3 * n]
+        return start, np.ascontiguousarray(scan), np.ascontiguousarray(smap.change[:3 * n])
 
     def legacy_peaks(self, state, y_zoh: np.ndarray, start_values: np.ndarray, scan_rows: np.ndarray,
                      change: np.ndarray, h: float, cost: StepCost) -> None:
@@ -499,9 +513,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         ``[u0; v0; ag; f]``, ``start_values = start @ y_zoh`` of :meth:`legacy_rows`);
         ``state`` still holds the start of the step."""
         n = self.n
-        re, im = start_values[:2 * n], start_values[2 * n:4 * n]
-        bound = change @ np.sqrt(re * re + im * im)
-        flags = np.abs(start_values[4 * n:]) + bound > state.peaks    # strict, see _interval
+        values = np.abs(start_values)
+        flags = values[4 * n:] + change @ values[:4 * n] > state.peaks    # strict, see _interval
         if not flags.any():
             cost.cleared += 1
             return
@@ -555,6 +568,9 @@ class BoucWenRK(BuildingIntegrator):
         d = _drift(state.u)
         return float(np.sum(0.5 * self.alpha * self.k * d * d
                             + 0.5 * (1.0 - self.alpha) * self.fy * self.dy * state.z * state.z))
+
+    def _shear_and_strain(self, state, d):
+        return self._shear(d, state.z), self.strain_energy(state)
 
     def _rhs(self, ag0, ag1, force):
         """``y' = fun(s, y)`` with ``y = [u, v, z, E_damping, E_input, E_hysteretic]``."""

@@ -219,17 +219,18 @@ class Building(Fmi2Slave):
 
     def _publish(self, force) -> None:
         """Outputs from the state (the integrator path and initialisation)."""
-        n, state, integ = self._n, self._state, self._integrator
+        n, state = self._n, self._state
+        drift, V, accel, strain = self._integrator.response(state, force)
         self.x[:n] = state.u
         self.v[:n] = state.v
-        self.drift[:n] = np.diff(state.u, prepend=0.0)
+        self.drift[:n] = drift
         if self._legacy:   # as the linear model always computed it (bit for bit)
             self.a[:n] = self._R @ np.concatenate([state.u, state.v]) + force / self._building.masses
         else:
-            self.a[:n] = integ.absolute_acceleration(state, force)
-        self.base_shear = float(integ.storey_shear(state)[0])
-        self.E_kinetic = self._building.kinetic_energy(state.v)
-        self.E_strain = integ.strain_energy(state)
+            self.a[:n] = accel
+        self.base_shear = float(V[0])
+        self.E_kinetic = 0.5 * float(state.v @ (self._building.masses * state.v))
+        self.E_strain = strain
         self.E_input = state.E_input
         self.E_external = state.E_external
         self.E_damping = state.E_damping
@@ -312,7 +313,9 @@ class Building(Fmi2Slave):
         n = self._n
         ag = self.ag
         f = self.F[:n]
-        if not (math.isfinite(ag) and np.isfinite(f).all()):
+        # one reduction instead of a per-element test; a sum that overflows is looked at closely
+        if not (math.isfinite(ag) and math.isfinite(f.sum())) and not (
+                math.isfinite(ag) and np.isfinite(f).all()):
             raise SlaveError(self._non_finite_input(ag, f))
         state = self._state
         y = self._y
@@ -327,8 +330,8 @@ class Building(Fmi2Slave):
             start, scan, change = peaks
             self._integrator.legacy_peaks(state, y, start @ y, scan, change, step_size, self.cost)
         i = 4 * n
-        state.u = w[:n].copy()
-        state.v = w[n:2 * n].copy()
+        state.u = w[:n]           # views of the fresh product: nothing else writes to w
+        state.v = w[n:2 * n]
         self.x[:n] = w[:n]
         self.v[:n] = w[n:2 * n]
         self.a[:n] = w[2 * n:3 * n]
@@ -366,11 +369,12 @@ class Building(Fmi2Slave):
                              f"2 <= n_knots <= {KNOT_CAPACITY}")
         times = self.t_knot[:count]
         values = self.ag_knot[:count]
-        for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
-            bad = np.flatnonzero(~np.isfinite(arr))
-            if bad.size:
-                i = int(bad[0])
-                raise SlaveError(f"input {name}[{i + 1}] = {float(arr[i])!r} {unit} is not finite")
+        if not (np.isfinite(times).all() and np.isfinite(values).all()):
+            for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
+                bad = np.flatnonzero(~np.isfinite(arr))
+                if bad.size:
+                    i = int(bad[0])
+                    raise SlaveError(f"input {name}[{i + 1}] = {float(arr[i])!r} {unit} is not finite")
         tol = _KNOT_TIME_TOL * h
         if abs(times[0] - t) > tol or abs(times[-1] - (t + h)) > tol:
             raise SlaveError(
@@ -378,12 +382,12 @@ class Building(Fmi2Slave):
                 f"[{t:.9g}, {t + h:.9g}] s: feed the ground motion's knots of the same step (step the "
                 f"ground motion first, as Gauss-Seidel does; a Jacobi master hands over the previous "
                 f"step's) or set n_knots = 0")
-        back = np.flatnonzero(np.diff(times) < 0.0)
-        if back.size:
-            i = int(back[0])
+        rel = times - t
+        if (rel[1:] < rel[:-1]).any():
+            i = int(np.flatnonzero(np.diff(times) < 0.0)[0])
             raise SlaveError(f"input t_knot must not decrease: t_knot[{i + 1}] = {times[i]:.9g} s > "
                              f"t_knot[{i + 2}] = {times[i + 1]:.9g} s")
-        rel = np.clip(times - t, 0.0, h)
         rel[0] = 0.0
         rel[-1] = h
+        np.clip(rel, 0.0, h, out=rel)
         return rel, values.copy()

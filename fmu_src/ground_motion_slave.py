@@ -16,7 +16,8 @@ inside and ``(t + h, ag(t + h-))`` (a jump where the record starts or ends is tw
 time; ``fmu_src/record_knots.py``).  A building fed these knots integrates the record exactly
 over any step length.  A step that needs more than KNOT_CAPACITY knots still succeeds and sets
 ``n_knots = 0``: use ``ag_mean`` for it.  Elements beyond ``n_knots`` are 0; before the first
-step ``n_knots = 0``.
+step ``n_knots = 0``.  The knots are computed when first read after a step (a host that does
+not read them does not pay for them).
 """
 from __future__ import annotations
 
@@ -60,10 +61,45 @@ class GroundMotion(Fmi2Slave):
                description="ground acceleration at the knot (the record is linear between knots)"),
     )
 
+    PRIVATE_STATE = ("_knot_step",)
+    _KNOTS = ("n_knots", "t_knot", "ag_knot")
+
     def __init__(self, **kwargs):
+        self._knot_step = None       # (t0, t1) of the step whose knots are not computed yet
         super().__init__(**kwargs)
         self._record = None
         self._start_time = 0.0
+
+    # -- knots, computed when read ---------------------------------------------------------------
+    def _scalar_getter(self, attr):
+        if attr == "n_knots":
+            return lambda: (self._fill_knots(), self.n_knots)[1]
+        return None
+
+    def _element_getter(self, attr, idx):
+        if attr not in self._KNOTS:
+            return super()._element_getter(attr, idx)
+
+        def get():
+            self._fill_knots()
+            return getattr(self, attr)[idx]
+        return get
+
+    def _fill_knots(self) -> None:
+        if self._knot_step is None:
+            return
+        t0, t1 = self._knot_step
+        self._knot_step = None
+        knots = step_knots(self._record, t0, t1, KNOT_CAPACITY)
+        self.t_knot[:] = 0.0
+        self.ag_knot[:] = 0.0
+        if knots is None:
+            self.n_knots = 0
+        else:
+            times, values = knots
+            self.n_knots = times.size
+            self.t_knot[:times.size] = times
+            self.ag_knot[:times.size] = values
 
     def setup_experiment(self, start_time, stop_time, tolerance):
         self._start_time = float(start_time or 0.0)
@@ -86,6 +122,7 @@ class GroundMotion(Fmi2Slave):
         self.n_knots = 0
         self.t_knot[:] = 0.0
         self.ag_knot[:] = 0.0
+        self._knot_step = None
 
     def _records_dir(self) -> Path | None:
         """This FMU's own bundled records (``resources/fmu_src/records``), if it has them."""
@@ -102,18 +139,4 @@ class GroundMotion(Fmi2Slave):
         self.ag_mean = record.mean_over(current_time, t1)
         self.vg = record.velocity(t1)
         self.dg = record.displacement(t1)
-        knots = step_knots(record, current_time, t1, KNOT_CAPACITY)
-        if knots is None:
-            if self.n_knots:
-                self.t_knot[:] = 0.0
-                self.ag_knot[:] = 0.0
-            self.n_knots = 0
-        else:
-            times, values = knots
-            count = times.size
-            self.t_knot[:count] = times
-            self.ag_knot[:count] = values
-            if count < self.n_knots:
-                self.t_knot[count:self.n_knots] = 0.0
-                self.ag_knot[count:self.n_knots] = 0.0
-            self.n_knots = count
+        self._knot_step = (current_time, t1)

@@ -67,28 +67,38 @@ _SERIES_RADIUS = 0.25              # phi functions by series inside this radius
 _SERIES_TERMS = 14                 # 0.25^14 / 14! ~ 3e-20
 
 
-def phi_functions(x):
-    """``(e^x, phi1(x), phi2(x))`` of a complex array, accurate for every x (series near 0)."""
+def phi_functions(x, second: bool = True):
+    """``(e^x, phi1(x), phi2(x))`` of a complex array, accurate for every x.
+
+    ``phi1 = expm1(x) / x`` (numpy's complex expm1 is accurate to a few ulp near 0; 1 at 0);
+    ``phi2`` by its series inside ``|x| < 0.25`` and its closed form outside.  With
+    ``second=False`` phi2 is not computed (None): a segment without a ramp of the ground
+    acceleration multiplies it by zero.
+    """
     x = np.asarray(x, dtype=complex)
     e = np.exp(x)
+    zero = x == 0.0
+    if zero.any():
+        phi1 = np.expm1(x) / np.where(zero, 1.0, x)
+        phi1[zero] = 1.0
+    else:
+        phi1 = np.expm1(x) / x
+    if not second:
+        return e, phi1, None
     mag = np.abs(x)
     small = mag < _SERIES_RADIUS
     safe = np.where(small, 1.0, x)
-    phi1 = np.expm1(x) / safe
     phi2 = (e - 1.0 - x) / (safe * safe)
     if small.any():
         xs = x[small]
-        # Horner for sum x^k/(k+1)! and sum x^k/(k+2)!, as many terms as the largest |x| needs
-        # for a truncation error below 1e-17 (at most _SERIES_TERMS for |x| < 0.25)
+        # Horner for sum x^k/(k+2)!, as many terms as the largest |x| needs for a truncation
+        # error below 1e-17 (at most _SERIES_TERMS for |x| < 0.25)
         r = float(mag[small].max())
         terms = next((k for k in range(2, _SERIES_TERMS + 1) if r ** (k + 1) / _FACTORIALS[k + 1] < 1e-17),
                      _SERIES_TERMS)
-        p1 = np.full_like(xs, _INV_FACTORIALS[terms + 1])
         p2 = np.full_like(xs, _INV_FACTORIALS[terms + 2])
         for k in range(terms - 1, -1, -1):
-            p1 = p1 * xs + _INV_FACTORIALS[k + 1]
             p2 = p2 * xs + _INV_FACTORIALS[k + 2]
-        phi1[small] = p1
         phi2[small] = p2
     return e, phi1, phi2
 
@@ -266,6 +276,7 @@ class Configuration:
         self.peak_modal = F @ V
         self.peak_modal_abs = np.abs(self.peak_modal)
         self._maps: OrderedDict[float, SegmentMap] = OrderedDict()
+        self._exact: dict[float, SegmentMap] = {}      # the same maps by the exact length asked
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
 
@@ -286,10 +297,13 @@ class Configuration:
         """``q(s)`` (complex, shape ``(2n,) + shape(s)``) for segment time(s) s."""
         s = np.asarray(s, dtype=float)
         x = np.multiply.outer(self.lam, s)
-        e, p1, p2 = phi_functions(x)
+        ramp = bool(beta1.any())
+        e, p1, p2 = phi_functions(x, second=ramp)
         if s.ndim == 0:
-            return e * q0 + s * p1 * beta0 + s * s * p2 * beta1
-        return e * q0[:, None] + s * p1 * beta0[:, None] + s * s * p2 * beta1[:, None]
+            q = e * q0 + s * p1 * beta0
+            return q + s * s * p2 * beta1 if ramp else q
+        q = e * q0[:, None] + s * p1 * beta0[:, None]
+        return q + s * s * p2 * beta1[:, None] if ramp else q
 
     def state_at(self, q0, beta0, beta1, s):
         """Real state ``z(s)``."""
@@ -319,9 +333,15 @@ class Configuration:
 
     def segment_map(self, length: float) -> SegmentMap:
         """Real matrices of a segment of this length, cached (see :class:`SegmentMap`)."""
+        found = self._exact.get(length)
+        if found is not None:
+            return found
         key = float(f"{length:.12g}")   # equal lengths that differ by time round-off share a map
         found = self._maps.get(key)
         if found is not None:
+            if len(self._exact) >= 4 * self.max_maps:
+                self._exact.clear()
+            self._exact[length] = found
             return found
         length = float(length)
         n = self.n
@@ -357,13 +377,15 @@ class Configuration:
         result = SegmentMap(length, state, scan, damping, work, stacked, change, ramp_change)
         if len(self._maps) >= self.max_maps:
             self._maps.popitem(last=False)
+            self._exact.clear()
         self._maps[key] = result
+        self._exact[length] = result
         self.maps_built += 1
         return result
 
     def change_bounds(self, length: float):
-        """``(N, R)`` with ``|g(t) - g(0)| <= N @ |W z'(0)| + R |ag1|`` for ``t`` in ``[0, L]``
-        and every watched function ``g = watch_rows @ z``.
+        """``(N, R)`` with ``|g(t) - g(0)| <= N @ [|Re W z'(0)|; |Im W z'(0)|] + R |ag1|`` for
+        ``t`` in ``[0, L]`` and every watched function ``g = watch_rows @ z``.
 
         In modal coordinates ``q(t) - q(0) = t phi1(lam t) q'(0) + t^2 phi2(lam t) beta1``; for
         ``Re lam <= 0``, ``|t phi1(lam t)| = |e^{lam t} - 1| / |lam| <= min(t, 2 / |lam|)`` and
@@ -376,9 +398,10 @@ class Configuration:
         with np.errstate(divide="ignore"):
             reach = np.minimum(length, np.where(self.lam_abs > 0.0, 2.0 / self.lam_abs, np.inf))
         growth = math.exp(self.growth_rate * length)
-        change = np.ascontiguousarray(FV * (reach * growth)[None, :])
+        change = FV * (reach * growth)[None, :]
         ramp_change = FV @ (0.5 * length * length * growth * self.ramp_abs)
-        return change, ramp_change
+        # acting on [|Re q'(0)|; |Im q'(0)|] (their sum bounds |q'(0)|): no square root per step
+        return np.ascontiguousarray(np.hstack([change, change])), ramp_change
 
     def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
         """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
@@ -631,53 +654,33 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
 
 def max_abs(segment: "ModalSegment", c_modal: np.ndarray, offset: float, length: float,
             known: float, xtol: float, min_width: float, budget: int = 200,
-            pieces: int = 8, rtol: float = PEAK_RTOL, atol: float = 0.0) -> tuple[float, float]:
+            rtol: float = PEAK_RTOL, atol: float = 0.0) -> tuple[float, float]:
     """``(max |g|, where)`` over [0, length] of ``g = c' z + offset`` if it exceeds ``known``.
 
-    The segment is first cut into ``pieces`` sampled in one vectorised evaluation; then branch
-    and bound on each piece: a sub-interval whose Hermite bound on ``|g|`` stays at or below the
-    best value found, or on which ``g'`` provably keeps its sign (the extremes are then at its
-    ends, already counted), is dropped; a sign change of ``g'`` is refined by bracketed Newton
-    from the Hermite estimate, and the neighbourhood of that extremum in which the Taylor bound
+    Branch and bound: a sub-interval whose Hermite bound on ``|g|`` stays at or below the best
+    value found (plus ``rtol`` of it and ``atol``: the peak is then known to that accuracy), or
+    on which ``g'`` provably keeps its sign (the extremes are then at its ends, already
+    counted), is dropped; a sign change of ``g'`` is refined by bracketed Newton from the
+    Hermite estimate, and the neighbourhood of that extremum in which the Taylor bound
     ``|g(t*)| - |g''(t*)| r^2 / 2 + B3 r^3 / 6`` (B3 bounds the third derivative) stays below
     ``|g(t*)|`` is dropped too.  Returns ``(known, -1.0)`` when nothing exceeds ``known``.
     ``xtol`` (s) is the tolerance of the extremum's time: the value's error is of the order of
-    ``|g''| xtol^2``; a piece is dropped once its bound exceeds the best value by at most
-    ``rtol`` of it plus ``atol`` (the peak is then known to that accuracy).
+    ``|g''| xtol^2``.
     """
-    cfg = segment.cfg
     c_abs = np.abs(c_modal)
-    lam = cfg.lam
-    nodes = np.linspace(0.0, length, pieces + 1)
-    q = cfg.modal_at(segment.q0, segment.beta0, segment.beta1, nodes)          # (2n, P+1)
-    dq = lam[:, None] * q + segment.beta0[:, None] + segment.beta1[:, None] * nodes
-    ddq = lam[:, None] * dq + segment.beta1[:, None]
-    g = (c_modal @ q).real + offset
-    g1 = (c_modal @ dq).real
-    g2 = (c_modal @ ddq).real
-    values = {float(s): [float(a), float(b), float(c)] for s, a, b, c in zip(nodes, g, g1, g2)}
-    for s, dqs in zip(nodes, dq.T):
-        segment.seed(float(s), None, dqs)
-    best, where = known, -1.0
-    k = int(np.argmax(np.abs(g)))
-    if abs(g[k]) > best:
-        best, where = float(abs(g[k])), float(nodes[k])
-    # vectorised Hermite test of every piece
-    width = length / pieces
-    w4 = width ** 4 / 384.0
-    ramp = np.abs(segment.beta1)
-    amp = (np.abs(dq[:, :-1]) + width * ramp[:, None]) * math.exp(cfg.growth_rate * width)
-    b4 = (c_abs * cfg.lam3) @ amp + float((c_abs * cfg.lam2) @ ramp)
-    lo, hi = hermite_range(g[:-1], g[1:], width * g1[:-1], width * g1[1:])
-    keep = np.maximum(-lo, hi) + b4 * w4 > best * (1.0 + rtol) + atol
-    stack = [(float(nodes[i]), float(nodes[i + 1])) for i in np.flatnonzero(keep)[::-1]]
 
     def at(s):
         d = segment.derivatives(c_modal, s, 3)
         d[0] += offset
         return d
 
-    evaluations = pieces + 1
+    values = {0.0: at(0.0), length: at(length)}
+    best, where = known, -1.0
+    for s in (0.0, length):
+        if abs(values[s][0]) > best:
+            best, where = abs(values[s][0]), s
+    stack = [(0.0, length)]
+    evaluations = 2
     while stack and evaluations < budget:
         a, b = stack.pop()
         va, vb = values[a], values[b]
