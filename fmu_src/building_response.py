@@ -61,6 +61,7 @@ PEAK_XTOL = 1e-7            # relative to the segment: a peak's time to 1e-7 L (
 # far below any engineering meaning: a response of 1e-15 m at the start of a record is not
 # searched through (its bounds are dominated by cancelling modal terms).
 PEAK_ATOL = (1e-12, 1e-12, 1e-9)   # |x| (m), |drift| (m), |a| (m/s^2)
+MAX_PENDING = 256           # deferred peak searches kept before they are run anyway
 MAX_EVENTS_PER_STEP = 10000  # a bound on yield/unloading events in one communication step
 MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
 _ROOT_BUDGET = 200          # evaluations per root search (bisection depth ~ 2^-100 of the segment)
@@ -73,7 +74,8 @@ class BuildingState:
     ``u``, ``v`` floor displacements (m) and velocities (m/s) relative to the ground;
     ``slip`` (m) and ``mode`` (0, +1, -1) the bilinear storeys' state; ``z`` (-) the Bouc-Wen
     variable and ``rk_step`` (s) its integrator's step (part of the state, so that a restored
-    state replays bit for bit); ``peaks`` the running peaks ``[|x| (m), |drift| (m), |a| (m/s^2)]`` (3n, also
+    state replays bit for bit); ``peaks`` the running peaks established so far and ``pending``
+    the segments that may still raise them (searched when the peaks are read); ``peaks`` the running peaks ``[|x| (m), |drift| (m), |a| (m/s^2)]`` (3n, also
     as views ``peak_x``, ``peak_drift``, ``peak_accel``); energies (J) accumulated from the start.
     """
 
@@ -88,6 +90,9 @@ class BuildingState:
     E_damping: float = 0.0
     E_hysteretic: float = 0.0
     rk_step: float = 0.0      # Bouc-Wen: the last accepted Runge-Kutta step (s), the next first guess
+    # segments in which a peak may exceed ``peaks``, searched when the peaks are read
+    # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
+    pending: list = field(default_factory=list)
 
     @property
     def peak_x(self) -> np.ndarray:
@@ -114,7 +119,8 @@ class StepCost:
     cleared: int = 0          # segments cleared by the cheap bound (tier 1)
     events: int = 0
     root_searches: int = 0
-    peak_searches: int = 0
+    peak_searches: int = 0    # in-step peak searches run (max_abs)
+    peaks_deferred: int = 0   # segments set aside for a search when the peaks are read
     rk_steps: int = 0
     rhs_evaluations: int = 0
     event_log: list = field(default_factory=list)   # (time in the step (s), storey index, kind)
@@ -197,6 +203,9 @@ class BuildingIntegrator:
     def advance(self, state: BuildingState, times, ag, force) -> StepCost:
         raise NotImplementedError
 
+    def resolve_peaks(self, state: BuildingState, cost: StepCost | None = None) -> None:
+        """Run the deferred peak searches (none for integrators that search at once)."""
+
 
 class ExactPiecewiseLinear(BuildingIntegrator):
     """Linear and bilinear storeys, exact between located events (see module docstring)."""
@@ -262,6 +271,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
+        if not self.hysteresis.inelastic and times.size > 3:
+            return self._advance_linear(state, times, ag, force)    # worth batching
         cost = StepCost()
         events = 0
         h = float(times[-1] - times[0])
@@ -276,6 +287,70 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 raise ValueError(f"more than {MAX_EVENTS_PER_STEP} yield/unloading events in one step of "
                                  f"{h:.6g} s: the storeys chatter at their yield limits; use shorter steps")
         cost.events = events
+        return cost
+
+    def _advance_linear(self, state, times, ag, force) -> StepCost:
+        """A linear building over all the knot intervals of a step at once.
+
+        Without events the intervals only chain through the state: one matrix-vector product
+        each (with the cached map of its length) carries the state across them; then one
+        matrix product per distinct length gives every interval's energies and tier-1 test
+        quantities, and only the intervals whose test fails (a peak may grow) are looked at one
+        by one.  Same arithmetic as :meth:`_interval` per interval, without its per-interval
+        overhead (a step of 30 record intervals costs little more than one).
+        """
+        n = self.n
+        cost = StepCost()
+        lengths = np.diff(times)
+        idx = np.flatnonzero(lengths > 0.0)          # equal times: a jump, no time passes
+        count = idx.size
+        cfg = self.configuration(state.mode)
+        size = 3 * n + 2
+        Y = np.empty((count, size))
+        Y[:, 2 * n] = ag[idx]
+        Y[:, 2 * n + 1] = (ag[idx + 1] - ag[idx]) / lengths[idx]
+        Y[:, 2 * n + 2:] = force
+        maps = [cfg.segment_map(float(L)) for L in lengths[idx]]
+        z = np.concatenate([state.u, state.v])
+        for j in range(count):
+            Y[j, :2 * n] = z
+            z = maps[j].state @ Y[j]
+        cost.segments = count
+        groups: dict[int, list[int]] = {}
+        for j, smap in enumerate(maps):
+            groups.setdefault(id(smap), []).append(j)
+        e_damp = e_in = 0.0
+        flagged = []
+        accel_offset = force * self._inv_m
+        peaks = state.peaks
+        for js in groups.values():
+            smap = maps[js[0]]
+            rows = 6 * n + smap.scan.shape[0]
+            Yg = Y[js]
+            out = Yg @ smap.stacked.T
+            e_damp += float(np.einsum("ij,ij->", Yg, out[:, rows:rows + size]))
+            e_in += float(np.einsum("ij,ij->", Yg, out[:, rows + size:]))
+            bound = np.abs(out[:, rows - 4 * n:rows]) @ smap.change.T
+            slopes = np.abs(Yg[:, 2 * n + 1])
+            if slopes.any():
+                bound += slopes[:, None] * smap.ramp_change
+            watched = np.abs(out[:, 2 * n:5 * n] + np.concatenate([np.zeros(2 * n), accel_offset]))
+            # against the peaks at the step start: a superset of what later intervals need
+            need = (watched + bound[:, :3 * n] > peaks).any(axis=1)
+            flagged.extend((js[i], out[i, 6 * n:rows]) for i in np.flatnonzero(need))
+        cost.cleared = count - len(flagged)
+        xtol = EVENT_XTOL * float(times[-1] - times[0])
+        for j, scan_vector in sorted(flagged, key=lambda item: item[0]):
+            L = maps[j].length
+            y = Y[j].copy()
+            scan = Scan(cfg, scan_vector, float(y[2 * n + 1]), L)
+            self._peaks(cfg, scan, None, state, y, force, L, xtol, cost)
+        state.E_damping += e_damp
+        state.E_input += e_in
+        u1 = z[:n].copy()
+        state.E_external += float(force @ (u1 - state.u))
+        state.u = u1
+        state.v = z[n:].copy()
         return cost
 
     def _interval(self, state, length, ag0, ag1, force, cost, h, start) -> int:
@@ -462,7 +537,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
         The end values are recorded; the functions that tier 1 (``flags``; all if None) could
         not clear are tested by the cubic Hermite bound and, where a new peak remains possible,
-        searched (:func:`max_abs`).
+        the segment is kept in ``state.pending`` for a search when the peaks are read
+        (:meth:`resolve_peaks`): a peak that a later step exceeds is never searched.
         """
         n = self.n
         G, B = scan.G, scan.B
@@ -472,6 +548,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         new = np.maximum(state.peaks, np.abs(g1))
         w4 = length ** 4 / 384.0
         candidates = range(3 * n) if flags is None else np.flatnonzero(flags)
+        key = (state.mode != 0).tobytes()
+        deferred = []
         for j in candidates:
             offset = accel_offset[j - 2 * n] if j >= 2 * n else 0.0
             g0 = G[j, 0] + offset
@@ -485,11 +563,46 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             lo, hi = hermite_range_scalar(g0, g1[j], length * s0, length * s1)
             if max(-lo, hi) + B[j, 0] * w4 <= new[j] + self._peak_atol[j]:
                 continue
-            segment = segment or ModalSegment(cfg, y[:2 * n], y[2 * n:])
+            # a new peak is possible in this segment: keep it for a search when the peaks are
+            # read (most are superseded by a later, higher peak before anyone reads them)
+            deferred.append((int(j), max(-lo, hi) + B[j, 0] * w4, key, y, length, xtol))
+        state.peaks = new
+        if deferred:
+            y_copy = y.copy()
+            state.pending.extend((j, U, k_, y_copy, L, xt) for j, U, k_, _, L, xt in deferred)
+            cost.peaks_deferred += len(deferred)
+            if len(state.pending) > MAX_PENDING:
+                # drop what the established peaks already exceed; search if still too many
+                atol = self._peak_atol
+                state.pending = [e for e in state.pending if e[1] > new[e[0]] + atol[e[0]]]
+                if len(state.pending) > MAX_PENDING // 2:
+                    self.resolve_peaks(state, cost)
+
+    def resolve_peaks(self, state, cost=None) -> None:
+        """Run the deferred peak searches, highest bound first (:func:`max_abs`)."""
+        if not state.pending:
+            return
+        n = self.n
+        cost = cost or StepCost()
+        new = state.peaks.copy()
+        atol = self._peak_atol
+        segments = {}
+        for j, bound, key, y, length, xtol in sorted(state.pending, key=lambda e: -e[1]):
+            if bound <= new[j] + atol[j]:
+                continue
+            cfg = self._configuration_of(key)
+            segment = segments.get(id(y))
+            if segment is None:
+                segment = segments[id(y)] = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+            offset = y[2 * n + 2 + j - 2 * n] * self._inv_m[j - 2 * n] if j >= 2 * n else 0.0
             cost.peak_searches += 1
             new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,
-                                min_width=xtol, budget=_ROOT_BUDGET, atol=self._peak_atol[j])
+                                min_width=xtol, budget=_ROOT_BUDGET, atol=atol[j])
         state.peaks = new
+        state.pending = []
+
+    def _configuration_of(self, key: bytes) -> Configuration:
+        return self.configuration(np.frombuffer(key, dtype=bool).astype(np.int64))
 
     # -- the linear zero-order-hold step computed elsewhere (building_slave) -------------------
     def legacy_rows(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

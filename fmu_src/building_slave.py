@@ -159,6 +159,7 @@ class Building(Fmi2Slave):
         cached = self._derived_cache
         if cached is None:
             state, integ = self._state, self._integrator
+            integ.resolve_peaks(state, self.cost)      # the in-step peak searches left to do
             heights = self.storey_height[:self._n]
             cached = self._derived_cache = {
                 "V": integ.storey_shear(state),
@@ -301,6 +302,7 @@ class Building(Fmi2Slave):
         total.events += cost.events
         total.root_searches += cost.root_searches
         total.peak_searches += cost.peak_searches
+        total.peaks_deferred += cost.peaks_deferred
         total.rk_steps += cost.rk_steps
         total.rhs_evaluations += cost.rhs_evaluations
 
