@@ -391,8 +391,10 @@ def test_bouc_wen_building_matches_solve_ivp_and_balances_energy(nn, beta, gamma
     ours = np.array(ours)
     scale = np.abs(ref).max(axis=0)
     err = (np.abs(ours - ref) / scale).max()
-    # our rtol 1e-8 against the reference's 1e-12 over 600 restarts: agreement to ~1e-7
-    assert err < 1e-6, err
+    # our rtol 1e-8 against the reference's 1e-12: local errors of 1e-8 accumulated over 600
+    # restarts and 6 s of a yielding response come to ~1e-6 of each state's range (measured
+    # 6.5e-7 to 9.2e-7 for the three parameter sets); a wrong law is off by percent
+    assert err < 5e-6, err
     assert np.max(np.abs(st.peak_drift / it.dy)) > 1.5      # it yields
     scale_e = max(abs(st.E_input), 1.0)
     # the energy terms are integrated with the state: the balance closes to the tolerance
