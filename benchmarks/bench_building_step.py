@@ -114,10 +114,10 @@ def fmpy_costs() -> None:
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
-    from build_fmu import DEFAULT_OUT, build_all
-    from cosim.fmi import exit_process
+    from cosim.fmus import build_all
+    from cosim.master.fmi import exit_process
 
-    path = build_all(DEFAULT_OUT, names=("building",))["building"]
+    path = build_all(names=("building",))["building"]
     md = read_model_description(str(path))
     variables = {v.name: v for v in md.modelVariables}
     unzipped = extract(str(path))

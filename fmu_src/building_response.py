@@ -49,11 +49,11 @@ import numpy as np
 from scipy.integrate import DOP853
 from scipy.optimize import brentq
 
-from fmu_src.hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
+from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from fmu_src.linear_response import (Configuration, ModalSegment, Scan, first_root, hermite_range_scalar,
+from .linear_response import (Configuration, ModalSegment, Scan, first_root, hermite_range_scalar,
                                      max_abs)
-from fmu_src.shear_building import ShearBuilding
+from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
 PEAK_XTOL = 1e-7            # relative to the segment: a peak's time to 1e-7 L (its value to ~(w L 1e-7)^2)

@@ -37,11 +37,11 @@ import math
 
 import numpy as np
 
-from fmu_src.building_response import ExactPiecewiseLinear, StepCost, integrator_for
-from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
-from fmu_src.hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
-from fmu_src.record_knots import KNOT_CAPACITY
-from fmu_src.shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
+from .building_response import StepCost, integrator_for
+from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
+from .hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
+from .record_knots import KNOT_CAPACITY
+from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64
