@@ -275,3 +275,18 @@ def test_unused_storeys_keep_their_outputs_zero_and_are_not_checked(building_fmu
     assert not s.messages
     assert s.get("V[4]", "mu[4]", "x_peak[4]", "drift_residual[4]").tolist() == [0.0] * 4
     s.close()
+
+
+def test_free_mass_peak_inside_a_step(building_fmu):
+    """A free mass thrown against a constant force turns round inside a step: its peak is the
+    closed form v0^2 / (2 F / m), not the value at a step end."""
+    m, F, v0, h = 200.0, -50.0, 0.3, 0.16      # turns round at 1.2 s, in the middle of step 8
+    s = Slave(building_fmu, "free", **{"m[1]": m, "k[1]": 0.0, "zeta": 0.0, "v0[1]": v0})
+    for _ in range(12):                   # to 1.92 s: on its way back, still on the + side
+        s.step(h, **{"F[1]": F})
+    peak = s.get("x_peak[1]")[0]
+    assert peak == pytest.approx(v0 ** 2 / (2 * abs(F) / m), rel=1e-12)
+    ends = [abs(v0 * t + 0.5 * F / m * t * t) for t in h * np.arange(1, 13)]
+    assert max(ends) < peak * (1 - 1e-3)      # the turning point is not a step end
+    assert s.get("a_peak[1]")[0] == pytest.approx(abs(F) / m, rel=1e-14)
+    s.close()

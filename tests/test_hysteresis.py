@@ -526,3 +526,52 @@ def test_bouc_wen_dissipation_is_never_negative_in_the_allowed_range():
         assert np.all(r >= 0.0)
     r = bouc_wen_dissipation_rate(z[:, None], rates[None, :], 1.0, 0.05, 2.0, 0.2, 0.6)   # beta < gamma
     assert np.any(r < 0.0)
+
+
+def test_deferred_peak_searches_give_the_peaks_of_immediate_ones():
+    """Resolving the in-step peak searches at every step or only at the end: the same peaks
+    (to the search's 1e-9 value tolerance: a later, higher known value prunes earlier)."""
+    rec = el_centro(0.3)
+    n, h = 3, 0.01
+    b = ShearBuilding.from_period(0.5, [3e5] * n, [1.0, 0.8, 0.6], 0.05)
+    fy = np.array([0.3, 0.25, 0.18]) * 3e5 * n * G
+    results = []
+    for every_step in (True, False):
+        it = integrator_for(b, StoreyHysteresis("bilinear", fy, 0.05))
+        st = it.initial_state(np.zeros(n), np.zeros(n))
+        deferred = 0
+        for i in range(800):
+            cost = it.advance(st, [0.0, h], [rec.mean_over(i * h, (i + 1) * h)] * 2, np.array([0.0, 1e4, 0.0]))
+            deferred += cost.peaks_deferred
+            if every_step:
+                it.resolve_peaks(st)
+        it.resolve_peaks(st)
+        assert deferred > 20 and not st.pending
+        results.append(st.peaks.copy())
+    np.testing.assert_allclose(results[1], results[0], rtol=2e-9)
+
+
+def test_a_long_knot_step_equals_its_intervals_one_by_one():
+    """The batched linear path (one call over 30 record intervals) against 30 calls of one
+    interval each: the same states, energies and peaks to round-off."""
+    rec = el_centro(0.3)
+    n = 4
+    b = ShearBuilding.from_period(0.8, [3e5] * n, [1.0, 0.9, 0.7, 0.5], 0.05)
+    force = np.array([0.0, 1e4, 0.0, -2e4])
+    long_it = integrator_for(b, StoreyHysteresis("linear"))
+    short_it = integrator_for(b, StoreyHysteresis("linear"))
+    a = long_it.initial_state(np.zeros(n), np.zeros(n))
+    s = short_it.initial_state(np.zeros(n), np.zeros(n))
+    for i in range(20):
+        t0, t1 = 1.0 + 0.3 * i, 1.0 + 0.3 * (i + 1)
+        kt, ka = step_knots(rec, t0, t1)
+        long_it.advance(a, kt - t0, ka, force)
+        for j in range(kt.size - 1):
+            short_it.advance(s, [0.0, kt[j + 1] - kt[j]], [ka[j], ka[j + 1]], force)
+    long_it.resolve_peaks(a)
+    short_it.resolve_peaks(s)
+    scale = np.abs(s.u).max()
+    np.testing.assert_allclose(a.u, s.u, rtol=0, atol=1e-12 * scale)
+    for key in ("E_input", "E_damping", "E_external"):
+        assert getattr(a, key) == pytest.approx(getattr(s, key), rel=1e-12)
+    np.testing.assert_allclose(a.peaks, s.peaks, rtol=1e-9)
