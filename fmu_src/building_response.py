@@ -607,9 +607,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     # -- the linear zero-order-hold step computed elsewhere (building_slave) -------------------
     def legacy_rows(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For a zero-order-hold step ``h`` of the elastic building acting on ``y = [u0; v0; ag; f]``:
-        ``(start, scan, change)``: ``start @ y = [Re W z'(0); Im W z'(0); watched functions at 0
-        (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector and ``change`` the tier-1 bound
-        acting on ``|Re| + |Im|`` (an upper bound of the modal amplitude)."""
+        ``(start, scan, reach)``: ``start @ y = [Re W z'(0); Im W z'(0); watched functions at 0
+        (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector, and ``reach @ |start @ y|``
+        the tier-1 bound of every watched function over the step (its value at 0 plus the
+        change bound acting on ``|Re| + |Im|``, an upper bound of the modal amplitude)."""
         cfg = self.configuration(np.zeros(self.n, dtype=np.int64))
         smap = cfg.segment_map(h)
         n = self.n
@@ -618,19 +619,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
         watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)
         start = np.ascontiguousarray(np.vstack([scan[-4 * n:], watch[:3 * n]]))
-        return start, np.ascontiguousarray(scan), np.ascontiguousarray(smap.change[:3 * n])
+        reach = np.ascontiguousarray(np.hstack([smap.change[:3 * n], np.eye(3 * n)]))
+        return start, np.ascontiguousarray(scan), reach
 
     def legacy_peaks(self, state, y_zoh: np.ndarray, start_values: np.ndarray, scan_rows: np.ndarray,
-                     change: np.ndarray, h: float, cost: StepCost) -> None:
+                     reach: np.ndarray, h: float, cost: StepCost) -> None:
         """Running peaks over a zero-order-hold step of the elastic building (``y_zoh`` =
         ``[u0; v0; ag; f]``, ``start_values = start @ y_zoh`` of :meth:`legacy_rows`);
         ``state`` still holds the start of the step."""
-        n = self.n
-        values = np.abs(start_values)
-        flags = values[4 * n:] + change @ values[:4 * n] > state.peaks    # strict, see _interval
+        flags = reach @ np.abs(start_values) > state.peaks    # strict, see _interval
         if not flags.any():
             cost.cleared += 1
             return
+        n = self.n
         cfg = self.configuration(state.mode)
         y = np.empty(3 * n + 2)
         y[:2 * n + 1] = y_zoh[:2 * n + 1]
