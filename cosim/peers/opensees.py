@@ -29,7 +29,10 @@ model:
   The element deformation is ``u_right - u_left = -(delta + gap)``.
 
 Time integration: Newmark average acceleration (``gamma = 1/2, beta = 1/4``) at a fixed
-``dt``, Newton iterations on ``NormDispIncr``.  The contact materials return no damping
+``dt``, Newton iterations on ``NormDispIncr``.  Contact energy is measured with the rule this
+integrator conserves: the trapezoid ``0.5 (F_n + F_n+1) (delta_n+1 - delta_n)`` over each
+contact element's own, unclipped deformation (:func:`contact_work`; why, in
+:class:`PeerResult`).  The contact materials return no damping
 tangent for their ``d'``-dependent term, so Newton is not quadratic during the approach and
 plain Newton fails at ``dt >= 5e-4 s`` on several records; each step therefore falls back
 through ``KrylovNewton``, ``NewtonLineSearch`` and ``ModifiedNewton`` and then halves the
@@ -111,13 +114,26 @@ class PeerResult:
     """Outcome of :func:`run_opensees` (SI units).
 
     ``t`` holds every step (s); ``u`` the floor displacements of all buildings side by side
-    (m); ``contact_force`` (N, >= 0 compressive) and ``penetration`` (m) per contact.
-    ``dissipated_energy_J`` is the area of the contact force-penetration loops (trapezoidal
-    rule on the steps, the rule Newmark's average acceleration is consistent with), minus
-    the elastic energy still stored at the end.  ``wall_time_s`` times the analysis loop in
-    the child process; ``build_time_s`` the model definition.  ``algorithms`` counts the
-    steps each fallback algorithm settled; ``subdivided_steps`` the steps that had to be
-    halved.
+    (m); ``v`` their velocities (m/s) when the run was asked to record them
+    (``record_velocity``; else an empty array); ``contact_force`` (N, >= 0 compressive) and
+    ``penetration`` (m, the element's own deformation as ``delta = x_left - x_right - gap``,
+    negative while open, never clipped) per contact.
+
+    ``dissipated_energy_J`` is what the contact elements took out of the *discrete* solution:
+    :func:`contact_work` (the trapezoid ``0.5 (F_n + F_n+1) (delta_n+1 - delta_n)`` summed over
+    the steps, on the element's unclipped deformation) minus the elastic energy still stored
+    at the end.  That trapezoid is the rule Newmark's average acceleration conserves: with
+    ``gamma = 1/2, beta = 1/4`` the kinetic energy changes over a step by exactly the trapezoid
+    of every force over its own displacement increment, so the energy balance of the OpenSees
+    solution closes with it (``tests/test_opensees_peer.py`` checks the balance to round-off).
+    Clipping the penetration at zero, as this peer once did, drops the part of the closing and
+    opening steps spent on the open side of the gap and over-states the dissipation (default
+    scene at dt = 5 ms: +6.9 % clipped, -0.2 % consistent, against the reference).
+
+    ``wall_time_s`` times the analysis loop in the child process; ``build_time_s`` the model
+    definition.  ``algorithms`` counts the steps each fallback algorithm settled;
+    ``subdivided_steps`` the steps that had to be halved (the balance then holds per
+    sub-step, not over the recorded step).
     """
 
     material: str
@@ -137,6 +153,7 @@ class PeerResult:
     algorithms: dict = field(default_factory=dict)
     subdivided_steps: int = 0
     message: str = ""
+    v: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def displacements(self, building: int) -> np.ndarray:
         return self.u[:, self.floor_offsets[building]:self.floor_offsets[building + 1]]
@@ -169,7 +186,7 @@ def _storey_stiffnesses(building) -> np.ndarray:
 
 def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time: float, dt: float,
                       x0=None, v0=None, material: str = "JankowskiImpact", *, tol: float = 1e-12,
-                      max_iter: int = 25, max_subdivisions: int = 4) -> dict:
+                      max_iter: int = 25, max_subdivisions: int = 4, record_velocity: bool = False) -> dict:
     """The OpenSees model as plain numbers (what the child process receives)."""
     if material not in MATERIALS:
         raise ValueError(f"material = {material!r} is not allowed: one of {', '.join(MATERIALS)}")
@@ -207,23 +224,25 @@ def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time
                                   gap=float(contact.gap)))
     return dict(buildings=spec_buildings, ground=spec_ground, contacts=spec_contacts, stop_time=stop_time,
                 dt=dt, material=material, tol=float(tol), max_iter=int(max_iter),
-                max_subdivisions=int(max_subdivisions))
+                max_subdivisions=int(max_subdivisions), record_velocity=bool(record_velocity))
 
 
 # -- the parent side -----------------------------------------------------------------------------------
 def run_opensees(buildings: Sequence, ground, contacts: Sequence, stop_time: float, dt: float,
                  x0=None, v0=None, material: str = "JankowskiImpact", *, tol: float = 1e-12,
-                 max_iter: int = 25, max_subdivisions: int = 4, timeout: float | None = None) -> PeerResult:
+                 max_iter: int = 25, max_subdivisions: int = 4, timeout: float | None = None,
+                 record_velocity: bool = False) -> PeerResult:
     """Solve the scene with OpenSees (Newmark average acceleration, fixed ``dt`` in s).
 
     Same plain inputs as :func:`cosim.peers.reference.solve_reference`.  ``tol`` (m) is the
     ``NormDispIncr`` tolerance: far below the penetrations (1e-5-1e-3 m) so that the
-    iteration error does not mask the time-step error.  Raises ``RuntimeError`` if
+    iteration error does not mask the time-step error.  ``record_velocity`` also returns the
+    floor velocities (``PeerResult.v``; off by default: reading them costs analysis time).  Raises ``RuntimeError`` if
     openseespy is not usable; a step that fails every fallback ends the run with
     ``converged = False`` and the history up to there.
     """
     spec = model_description(buildings, ground, contacts, stop_time, dt, x0, v0, material, tol=tol,
-                             max_iter=max_iter, max_subdivisions=max_subdivisions)
+                             max_iter=max_iter, max_subdivisions=max_subdivisions, record_velocity=record_velocity)
     if opensees_library_dir() is None and importlib.util.find_spec("openseespy") is None:
         raise RuntimeError("openseespy is not installed (pip install openseespy, extra 'bench')")
     with tempfile.TemporaryDirectory(prefix="opensees_peer_") as tmp:
@@ -243,6 +262,15 @@ def run_opensees(buildings: Sequence, ground, contacts: Sequence, stop_time: flo
     return _summarise(spec, arrays, summary, offsets)
 
 
+def contact_work(force: np.ndarray, penetration: np.ndarray) -> float:
+    """Work (J) a contact element took over a Newmark average-acceleration history: the
+    trapezoid ``sum 0.5 (F_n + F_n+1) (delta_n+1 - delta_n)`` of its compressive force ``F``
+    (N) over its own, unclipped penetration ``delta`` (m), step by step (the identity the
+    integrator conserves: see :class:`PeerResult`)."""
+    force, penetration = np.asarray(force, dtype=float), np.asarray(penetration, dtype=float)
+    return float(np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(penetration)))
+
+
 def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
     t, u, F, delta = arrays["t"], arrays["u"], arrays["force"], arrays["delta"]
     impacts = 0
@@ -250,10 +278,9 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
     for c, contact in enumerate(spec["contacts"]):
         on = F[:, c] > 0.0
         impacts += int(np.count_nonzero(on[1:] & ~on[:-1]) + (1 if on.size and on[0] else 0))
-        d = np.maximum(delta[:, c], 0.0)
-        loop = float(np.sum(0.5 * (F[1:, c] + F[:-1, c]) * np.diff(d)))
-        stored = contact["k"] * d[-1] ** (contact["n"] + 1.0) / (contact["n"] + 1.0) if on.size and on[-1] else 0.0
-        dissipated += loop - stored
+        d_end = max(float(delta[-1, c]), 0.0) if delta.size else 0.0
+        stored = contact["k"] * d_end ** (contact["n"] + 1.0) / (contact["n"] + 1.0) if on.size and on[-1] else 0.0
+        dissipated += contact_work(F[:, c], delta[:, c]) - stored
     peak_u = np.max(np.abs(u), axis=0) if u.size else np.zeros(offsets[-1])
     return PeerResult(
         material=spec["material"], dt=spec["dt"], converged=bool(summary["converged"]), t=t, u=u,
@@ -262,7 +289,8 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
         peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(offsets[:-1], offsets[1:])),
         floor_offsets=offsets, wall_time_s=float(summary["wall_time_s"]),
         build_time_s=float(summary["build_time_s"]), algorithms=summary["algorithms"],
-        subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"])
+        subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"],
+        v=arrays.get("v", np.zeros((0, u.shape[1] if u.ndim == 2 else 0))))
 
 
 def opensees_for_scene(scene, dt: float, material: str | None = None, overrides: dict | None = None,

@@ -143,8 +143,13 @@ def _worker(spec: dict) -> tuple[dict, dict]:
         n_steps = int(math.ceil(stop / dt))
     t = np.zeros(n_steps + 1)
     u = np.zeros((n_steps + 1, len(floors)))
+    # velocities only when asked (the energy-balance check): the benchmark's loop reads displacements
+    velocity = spec.get("record_velocity", False)
+    v = np.zeros((n_steps + 1, len(floors)) if velocity else (0, len(floors)))
     force = np.zeros((n_steps + 1, len(contact_tags)))
     u[0] = [ops.nodeDisp(node, 1) for node in floors]
+    if velocity:
+        v[0] = [ops.nodeVel(node, 1) for node in floors]
     stats = {"algorithms": {}, "subdivided_steps": 0}
     converged, message, k = True, "", 0
     t_start = time.perf_counter()
@@ -156,14 +161,16 @@ def _worker(spec: dict) -> tuple[dict, dict]:
             break
         t[k] = ops.getTime()
         u[k] = [ops.nodeDisp(node, 1) for node in floors]
+        if velocity:
+            v[k] = [ops.nodeVel(node, 1) for node in floors]
         for c, etag in enumerate(contact_tags):
             force[k, c] = max(0.0, -ops.eleResponse(etag, "basicForce")[0])
     wall = time.perf_counter() - t_start
     ops.wipe()
-    t, u, force = t[:k + 1], u[:k + 1], force[:k + 1]
+    t, u, v, force = t[:k + 1], u[:k + 1], v[:k + 1], force[:k + 1]
     delta = np.column_stack([u[:, i] - u[:, j] - gap for i, j, gap in dofs]) if dofs else np.zeros((t.size, 0))
     summary = dict(converged=converged, message=message, wall_time_s=wall, build_time_s=build_time, **stats)
-    return dict(t=t, u=u, force=force, delta=delta), summary
+    return dict(t=t, u=u, v=v, force=force, delta=delta), summary
 
 
 def _worker_main(argv: Sequence[str]) -> int:
