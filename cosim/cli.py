@@ -81,9 +81,13 @@ def cmd_run(args) -> int:
         return cmd_accuracy(args)
     from .master import format_summary, run_scene
 
+    record = args.record
+    if record not in ("summary", "all"):
+        record = [c.strip() for c in record.split(",") if c.strip()]
     run = run_scene(args.scene, _overrides(args.overrides), out=args.out, coupling=args.coupling, step=args.step,
                     stop_time=args.stop_time, fmu_dir=args.fmu_dir, plots=not args.no_plots,
-                    progress=False if args.no_progress else None)
+                    progress=False if args.no_progress else None, output_interval=args.output_interval,
+                    record=record)
     print(format_summary(run.summary))
     print(f"results: {run.folder}")
     return EXIT_OK
@@ -278,6 +282,12 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                    help="scene file or bundled scene name (default: %(default)s)")
     _scene_options(p)
     p.add_argument("--out", type=Path, help="result folder (default: out/<scene name>)")
+    p.add_argument("--output-interval", type=float, metavar="SECONDS",
+                   help="at most one history.csv row per interval (default: the scene's output_interval, else "
+                        "its step; 0: every communication point); peaks are taken from every step")
+    p.add_argument("--record", default="summary", metavar="SET",
+                   help="columns of history.csv: 'summary' (what the summary and plots use, the default), "
+                        "'all', or instance.variable names separated by commas")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.add_argument("--list", action="store_true", help="list the bundled scenes and exit")

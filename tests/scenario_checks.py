@@ -6,20 +6,26 @@ import numpy as np
 from cosim.master.runner import run_scene
 
 
+#: the tests look at every output at every communication point unless they say otherwise
+EVERYTHING = dict(record="all", output_interval=0.0)
+
+
 def run(name, fmu_dir, overrides=(), **kwargs):
-    """Run a bundled scene in memory (no result folder, no progress bar)."""
-    return run_scene(name, overrides, fmu_dir=fmu_dir, write=False, progress=False, **kwargs)
+    """Run a bundled scene in memory (no result folder, no progress bar), recording every
+    output at every communication point unless ``kwargs`` say otherwise."""
+    return run_scene(name, overrides, fmu_dir=fmu_dir, write=False, progress=False, **{**EVERYTHING, **kwargs})
 
 
 def simulate_scene(catalog, scene, overrides=(), **options):
-    """Load ``scene`` (name, path or dict) with ``overrides`` and simulate it on ``catalog``'s FMUs."""
+    """Load ``scene`` (name, path or dict) with ``overrides`` and simulate it on ``catalog``'s FMUs
+    (every output at every communication point unless ``options`` say otherwise)."""
     from cosim.master.simulate import simulate
     from cosim.master.system import System
     from cosim.master.loader import load_scene
 
     loaded = load_scene(scene, list(overrides), catalog)
     with System(loaded, catalog) as system:
-        return simulate(system, progress=False, **options)
+        return simulate(system, progress=False, **{**EVERYTHING, **options})
 
 
 def assert_contact_work_reaches_the_floors(result, scene):

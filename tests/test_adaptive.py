@@ -59,17 +59,31 @@ def test_steps_are_aligned_dyadic_fractions(short_default):
     # each step starts on a multiple of its own length (time is a count of the finest step)
     ratio = result.time[:-2] / h[:-1]
     np.testing.assert_allclose(ratio, np.round(ratio), atol=1e-6)
-    assert h.max() == pytest.approx(h_max)
+    # plain contacts take long steps where every gap provably stays open (up to 0.32 s)
+    assert h_max < h.max() <= 0.32 + 1e-9
     assert h.min() < h_max / 16          # refined at the contacts
-    # growth by at most a factor 2 per step
-    assert np.all(h[1:-1] / h[:-2] <= 2.0 + 1e-9)
+    # up to the base step, growth by at most a factor 2 per step
+    short = h[1:-1] <= h_max * (1.0 + 1e-9)
+    assert np.all((h[1:-1] / h[:-2])[short] <= 2.0 + 1e-9)
+
+
+def assert_do_steps(result):
+    """Each building steps once per accepted step plus once per rejected one; the ground motion
+    once per chunk it is read ahead; each contact once per step it did not sleep through plus
+    the steps it caught up with (cosim/master/dormancy.py)."""
+    cost, stats = result.cost, result.stats
+    attempts = cost.communication_steps + cost.rollbacks
+    for b in result.scene.buildings:
+        assert cost.do_steps[b.name] == attempts, b.name
+    assert cost.do_steps["ground"] == stats["ground_steps"] < attempts
+    (contact,) = result.scene.contacts
+    assert cost.do_steps[contact.name] == attempts - stats["dormant_steps"] + stats["catch_up_steps"]
+    assert stats["dormant_steps"] > 0
 
 
 def test_counters(short_default):
     result = short_default
-    # each instance steps once per accepted step plus once per rejected one
-    for name, count in result.cost.do_steps.items():
-        assert count == result.cost.communication_steps + result.cost.rollbacks, name
+    assert_do_steps(result)
     assert result.cost.communication_steps == result.time.size - 1
     assert result.stats["missed_events"] == 0
     assert result.cost.fmu_calls > 4 * result.cost.communication_steps
@@ -96,7 +110,8 @@ def test_agrees_with_reference(catalog, short_default):
     assert result["pounding_3.F_max"][-1] == pytest.approx(ref.peak_force_N, rel=0.01)
     assert result["pounding_3.E_dissipated"][-1] == pytest.approx(ref.dissipated_energy_J, rel=0.02)
     for b, peak in zip(scene.buildings, ref.peak_displacements):
-        u = max(np.max(np.abs(result[f"{b.name}.x[{i}]"])) for i in range(1, scene.n_storeys(b.name) + 1))
+        # the building's peaks located inside the steps (long steps span whole oscillations)
+        u = max(result[f"{b.name}.x_peak[{i}]"][-1] for i in range(1, scene.n_storeys(b.name) + 1))
         assert u == pytest.approx(float(np.max(peak)), rel=0.005)
     # the onsets land within one contact step of the reference's
     onsets = result.time[np.flatnonzero(np.diff(result["pounding_3.impacts"]) > 0)]
@@ -129,8 +144,7 @@ def test_rollback_when_the_prediction_fails(catalog):
     # both first order in the same contact step: the same impacts to 1 %
     assert late["pounding_3.F_max"][-1] == pytest.approx(normal["pounding_3.F_max"][-1], rel=0.01)
     assert late["pounding_3.E_dissipated"][-1] == pytest.approx(normal["pounding_3.E_dissipated"][-1], rel=0.01)
-    for name, count in late.cost.do_steps.items():
-        assert count == late.cost.communication_steps + late.cost.rollbacks, name
+    assert_do_steps(late)
     # a restored step leaves no trace: the energy balance still closes to round-off
     e = energy_history(late)
     open_ = late["pounding_3.F"] == 0.0

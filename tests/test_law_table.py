@@ -60,7 +60,8 @@ PROBE = textwrap.dedent('''
     for resolved, step in ((True, 2e-5), (False, 2e-7)):
         run = run_scene("single_impact", [Override("pounding", "model", "test_law"), Override("pounding", "CR", 0.6),
                                           Override("pounding", "resolve_impacts", resolved)],
-                        step=step, stop_time=0.002, fmu_dir=sys.argv[1], write=False, progress=False)
+                        step=step, stop_time=0.002, fmu_dir=sys.argv[1], write=False, progress=False,
+                        record="all", output_interval=0.0)
         r = run.result
         v_in = r["left.v[1]"][0] - r["right.v[1]"][0]
         v_out = r["right.v[1]"][-1] - r["left.v[1]"][-1]

@@ -30,7 +30,8 @@ TOLERANCE = 1e-3
 @pytest.fixture(scope="module")
 def ours(fmu_dir):
     """The whole default scene (40 s, 4000 steps of 10 ms, 12 impacts) in our Jacobi master."""
-    return run_scene("default", coupling="jacobi", fmu_dir=fmu_dir, write=False, progress=False)
+    return run_scene("default", coupling="jacobi", fmu_dir=fmu_dir, write=False, progress=False, record="all",
+                     output_interval=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +72,8 @@ def test_trajectories_agree_at_every_communication_point(ours, theirs):
 
 
 def test_libcosim_is_jacobi_not_gauss_seidel(ours, theirs, fmu_dir):
-    gs = run_scene("default", coupling="gauss-seidel", fmu_dir=fmu_dir, write=False, progress=False)
+    gs = run_scene("default", coupling="gauss-seidel", fmu_dir=fmu_dir, write=False, progress=False, record="all",
+                   output_interval=0.0)
     x_lc = theirs["right.x[3]"]
     gap_jacobi = np.max(np.abs(ours.result["right.x[3]"][1:] - x_lc))
     gap_gs = np.max(np.abs(gs.result["right.x[3]"][1:] - x_lc))
@@ -110,7 +112,7 @@ def test_c_api_path_agrees_on_a_scene_without_contact(fmu_dir):
     """Without a contact element there is no sign change on a connection, so the slaves,
     start values and connections go through libcosim's C API (no SSD involved)."""
     mine = run_scene("one_building", coupling="jacobi", stop_time=10.0, fmu_dir=fmu_dir, write=False,
-                     progress=False)
+                     progress=False, record="all", output_interval=0.0)
     lc = run_system(scene_system(mine.scene, fmu_dir), ["right.x[5]", "right.E_input"])
     assert lc.loaded_from == "C API"
     for key in ("right.x[5]", "right.E_input"):

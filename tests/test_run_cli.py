@@ -43,14 +43,30 @@ def test_readme_first_command_runs_the_default_scene(capsys, tmp_path, fmu_dir):
     for b in ("left", "right"):
         assert {"peak_displacement_m", "peak_drift_m"} <= set(summary["buildings"][b])
     assert summary["communication_steps"] == 300 and summary["stop_time_s"] == 3.0
-    # every output of every instance, as instance.variable columns
+    # what the summary and the plots use, as instance.variable columns, one row per 10 ms
     header = (out / "history.csv").read_text().splitlines()[0].split(",")
     assert header[0] == "time"
-    assert {"ground.ag_mean", "pounding_3.F", "pounding_3.impacts", "pounding_3.E_dissipated", "left.x[3]",
-            "right.x[5]", "right.drift[5]", "left.E_input"} <= set(header)
-    assert "left.x[4]" not in header  # only the storeys a building has
+    assert {"pounding_3.F", "pounding_3.impacts", "pounding_3.E_dissipated", "left.x[3]", "right.x[5]",
+            "left.E_input", "right.E_damping"} <= set(header)
+    assert "left.x[4]" not in header and "ground.ag_mean" not in header
     data = np.loadtxt(out / "history.csv", delimiter=",", skiprows=1)
     assert data.shape == (301, len(header)) and data[-1, 0] == pytest.approx(3.0)
+
+
+def test_record_all_at_an_output_interval(capsys, tmp_path, fmu_dir):
+    """--record all: every output of every instance; --output-interval 0.1: a row per 0.1 s."""
+    out = tmp_path / "all"
+    code, _, stderr = run_cli(capsys, "--fmu-dir", fmu_dir, "--stop-time", 1, "--out", out, "--no-plots",
+                              "--record", "all", "--output-interval", 0.1)
+    assert code == 0, stderr
+    header = (out / "history.csv").read_text().splitlines()[0].split(",")
+    assert {"ground.ag_mean", "right.drift[5]", "pounding_3.in_contact", "left.x_peak[3]"} <= set(header)
+    assert "left.x[4]" not in header  # only the storeys a building has
+    data = np.loadtxt(out / "history.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(data[:, 0], np.arange(11) * 0.1, atol=1e-12)
+    code, _, stderr = run_cli(capsys, "--fmu-dir", fmu_dir, "--stop-time", 1, "--out", tmp_path / "bad",
+                              "--output-interval", -1)
+    assert code == 2 and "output_interval = -1.0 must be a number >= 0" in stderr
 
 
 def test_subprocess_smoke(tmp_path, fmu_dir):

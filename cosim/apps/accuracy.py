@@ -80,7 +80,9 @@ FAMILIES = (
     Family("adaptive-resolved", "adaptive", True, "contact_fraction", (1 / 2, 1 / 8), base_step=1e-2),
     Family("adaptive-resolved-0.02", "adaptive", True, "contact_fraction", (1 / 2, 1 / 8), base_step=2e-2),
 )
-OPENSEES_DTS = (5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
+#: OpenSees' time steps (s): halving from 8 ms, down to where its dissipated energy is within
+#: about 0.05 % on the default scene
+OPENSEES_DTS = tuple(8e-3 / 2 ** k for k in range(7))
 #: the reduced study of the tests: one cheap point per strategy, on a short run
 REDUCED_FAMILIES = (
     Family("jacobi", "jacobi", False, "step", (1e-3,)),
@@ -165,17 +167,25 @@ def score(row: Row, ref: dict[str, Any], peak_force: float, impacts: int, dissip
 
 
 # -- runs ------------------------------------------------------------------------------------------
+#: the scene as its file says (coupling, step, contact law): the package's default settings
+DEFAULT_SETTINGS = Family("default settings", "", True, "default", (0.0,))
+
+
 def run_cosim(scene_name, family: Family, value: float, catalog, ref: dict[str, Any],
               overrides: Sequence[Override | str] = (), stop_time: float | None = None, repeats: int = 1) -> Row:
-    """One co-simulation run of the study (the fastest of ``repeats``)."""
+    """One co-simulation run of the study (the fastest of ``repeats``); ``family``
+    :data:`DEFAULT_SETTINGS` runs the scene as it is."""
     options: dict[str, Any] = {}
-    if family.setting == "step":
-        step = value
+    if family is DEFAULT_SETTINGS:
+        scene = load_scene(scene_name, list(overrides) + settings(stop_time=stop_time), catalog)
     else:
-        step = family.base_step
-        options[family.setting] = value
-    extra = list(overrides) + [Override("pounding", "resolve_impacts", family.resolve_impacts)]
-    scene = load_scene(scene_name, extra + settings(family.coupling, step, stop_time), catalog)
+        if family.setting == "step":
+            step = value
+        else:
+            step = family.base_step
+            options[family.setting] = value
+        extra = list(overrides) + [Override("pounding", "resolve_impacts", family.resolve_impacts)]
+        scene = load_scene(scene_name, extra + settings(family.coupling, step, stop_time), catalog)
     row = Row(family.name, family.setting, value)
     best = None
     with System(scene, catalog) as system:
@@ -223,6 +233,30 @@ def run_peer(scene, dt: float, ref: dict[str, Any]) -> Row:
                  [float(np.max(p)) for p in peer.peak_displacements], sorted(onsets))
 
 
+#: OpenSees' first time step in the search for its cheapest passing one (s), and the most halvings
+OPENSEES_START_DT = 8e-3
+OPENSEES_MAX_HALVINGS = 14
+
+
+def cheapest_passing_dt(scene, ref: dict[str, Any], start: float = OPENSEES_START_DT,
+                        max_halvings: int = OPENSEES_MAX_HALVINGS,
+                        log: Callable[[str], None] | None = None) -> tuple[Row | None, list[Row]]:
+    """OpenSees' cheapest run that meets :data:`CRITERIA`, found by halving ``dt`` from
+    ``start`` (never assumed): ``(passing row or None, every row tried)``.  The search stops at
+    the first passing ``dt``; ``dt`` never exceeds the stop time."""
+    rows: list[Row] = []
+    dt = min(float(start), float(scene.stop_time))
+    for _ in range(max_halvings + 1):
+        row = run_peer(scene, dt, ref)
+        rows.append(row)
+        if log is not None:
+            log("  " + _row_line(row))
+        if row.meets_criteria:
+            return row, rows
+        dt *= 0.5
+    return None, rows
+
+
 def run_study(scene_name: str, *, fmu_dir=None, catalog=None, overrides: Sequence[Override | str] = (),
               families: Sequence[Family] | None = None, opensees_dts: Sequence[float] | None = None,
               stop_time: float | None = None, repeats: int = 1, reference_rtol: float = 1e-10,
@@ -241,6 +275,9 @@ def run_study(scene_name: str, *, fmu_dir=None, catalog=None, overrides: Sequenc
         say(f"  {ref['impacts']} impacts, peak force {ref['peak_force_N']:.6g} N, dissipated "
             f"{ref['dissipated_energy_J']:.6g} J, wall {ref['wall_time_s']:.2f} s")
         study = Study(scene.name, scene.stop_time, ref, machine=machine_note())
+        row = run_cosim(scene_name, DEFAULT_SETTINGS, 0.0, catalog, ref, overrides, stop_time, repeats)
+        study.rows.append(row)
+        say("  " + _row_line(row))
         for family in families:
             for value in family.values:
                 row = run_cosim(scene_name, family, value, catalog, ref, overrides, stop_time, repeats)
@@ -308,6 +345,8 @@ def markdown(study: Study) -> str:
     for r in study.rows:
         if r.setting == "contact_fraction":
             setting = f"contact_fraction = 1/{1 / r.value:.0f}"
+        elif r.setting == "default":
+            setting = "the scene's"
         else:
             setting = f"{r.setting} = {r.value:.4g}"
         if not r.status.startswith("ok"):
@@ -320,6 +359,7 @@ def markdown(study: Study) -> str:
             f"{r.impacts} | {_pct(r.err_peak_force)} | {_pct(r.err_dissipated_energy)} | "
             f"{_pct(r.err_peak_displacement)} | {onset} | {_pct(r.energy_residual_relative)} | "
             f"{'yes' if r.meets_criteria else 'no'} |")
+    lines += ["", front_table(study)]
     best = study.best()
     lines.append("")
     if best is not None:
@@ -369,12 +409,109 @@ def plot(study: Study, path: Path) -> None:
     plt.close(fig)
 
 
+# -- the cost of accuracy as a front -----------------------------------------------------------------------
+#: the errors of the front (Row attribute, label)
+METRICS = (("err_peak_force", "peak contact force"), ("err_dissipated_energy", "dissipated energy"),
+           ("err_peak_displacement", "peak displacement"))
+#: error levels the front is read at (relative)
+FRONT_LEVELS = (0.02, 0.01, 0.005, 0.002, 0.001, 0.0005)
+
+
+def _valid(rows: Sequence[Row]) -> list[Row]:
+    return [r for r in rows if r.status.startswith("ok") and math.isfinite(r.error) and r.impacts >= 0]
+
+
+def front(rows: Sequence[Row], metric: str, impacts: int) -> list[tuple[float, float]]:
+    """The cost of accuracy: ``(wall time, error)`` of the runs no other run beats in both
+    (same impacts as the reference), ordered by wall time."""
+    points = sorted((r.wall_time_s, getattr(r, metric)) for r in _valid(rows) if r.impacts == impacts)
+    out, best = [], math.inf
+    for wall, err in points:
+        if err < best:
+            out.append((wall, err))
+            best = err
+    return out
+
+
+def time_to_reach(rows: Sequence[Row], level: float, impacts: int) -> Row | None:
+    """The fastest run whose three errors are all within ``level`` (and same impacts), or None."""
+    ok = [r for r in _valid(rows) if r.impacts == impacts and r.error <= level]
+    return min(ok, key=lambda r: r.wall_time_s) if ok else None
+
+
+def front_table(study: Study) -> str:
+    """Wall time to reach each error level (all three errors within it), the package against OpenSees."""
+    impacts = study.reference["impacts"]
+    ours = [r for r in study.rows if r.method != "opensees"]
+    peer = [r for r in study.rows if r.method == "opensees"]
+    lines = ["| largest error within | package: fastest run | wall s | OpenSees: fastest run | wall s | OpenSees / package |",
+             "|---|---|---|---|---|---|"]
+    for level in FRONT_LEVELS:
+        a, b = time_to_reach(ours, level, impacts), time_to_reach(peer, level, impacts)
+        label = (lambda r: "" if r is None else f"{r.method}, {r.setting} = {r.value:.4g}")
+        wall = (lambda r: "-" if r is None else f"{r.wall_time_s:.3f}")
+        ratio = (f"{b.wall_time_s / a.wall_time_s:.2f}" if a is not None and b is not None and a.wall_time_s > 0
+                 else "-")
+        lines.append(f"| {100 * level:g} % | {label(a)} | {wall(a)} | {label(b)} | {wall(b)} | {ratio} |")
+    return "\n".join(lines)
+
+
+def plot_front(study: Study, path: Path) -> None:
+    """Per error (peak force, dissipated energy, peak displacement) against wall time, log-log:
+    every family's runs, OpenSees', the package's front and OpenSees' front (runs with the
+    reference's impacts only), the default settings marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    impacts = study.reference["impacts"]
+    fig, axes = plt.subplots(1, len(METRICS), figsize=(15, 4.8), sharex=True)
+    markers = dict(zip(["jacobi", "gauss-seidel", "gauss-seidel-resolved", "adaptive", "adaptive-resolved",
+                        "adaptive-resolved-0.02", "opensees"], "sovDP*^"))
+    methods = list(dict.fromkeys(r.method for r in study.rows))
+    for ax, (metric, label) in zip(axes, METRICS):
+        for method in methods:
+            rows = sorted((r for r in _valid(study.rows) if r.method == method and r.impacts == impacts),
+                          key=lambda r: r.wall_time_s)
+            if not rows or method == DEFAULT_SETTINGS.name:
+                continue
+            ax.loglog([r.wall_time_s for r in rows], [max(getattr(r, metric), 1e-7) for r in rows],
+                      linestyle=":", marker=markers.get(method, "o"), mfc="none", lw=0.8, ms=5,
+                      color="k" if method == "opensees" else None, label=method)
+        for rows, name, style in (([r for r in study.rows if r.method != "opensees"], "package front", "-"),
+                                  ([r for r in study.rows if r.method == "opensees"], "OpenSees front", "--")):
+            pts = front(rows, metric, impacts)
+            if pts:
+                ax.step([p[0] for p in pts], [max(p[1], 1e-7) for p in pts], style, where="post", lw=1.6,
+                        color="tab:red" if name.startswith("package") else "k", label=name)
+        default = [r for r in _valid(study.rows) if r.method == DEFAULT_SETTINGS.name]
+        if default:
+            r = default[0]
+            ax.loglog([r.wall_time_s], [max(getattr(r, metric), 1e-7)], "*", ms=16, color="tab:red", mec="k",
+                      label="default settings")
+        for level in (0.02, 0.0005):
+            ax.axhline(level, color="grey", lw=0.6, ls="-.")
+        ax.set_title(f"{label}", fontsize=10)
+        ax.set_xlabel("wall time (s)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("relative error against the reference")
+    axes[-1].legend(fontsize=7, loc="lower left")
+    fig.suptitle(f"{study.scene}: the cost of accuracy (runs with the reference's {impacts} impacts; fronts: the "
+                 f"fastest run at each error; grey: 2 % and 0.05 %)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def write_study(study: Study, folder: str | Path) -> Path:
-    """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` in ``folder`` (written complete)."""
+    """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` and ``front.png`` in ``folder``
+    (written complete)."""
     with replaced_folder(folder) as tmp:
         write_csv(study, tmp / "accuracy.csv")
         (tmp / "accuracy.md").write_text(markdown(study))
         plot(study, tmp / "accuracy.png")
+        plot_front(study, tmp / "front.png")
     return Path(folder)
 
 

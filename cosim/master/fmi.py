@@ -168,6 +168,10 @@ class PortProtocol(Protocol):
 
     def set(self, values: Any = None) -> None: ...
 
+    def get_first(self, count: int) -> np.ndarray: ...
+
+    def set_first(self, count: int) -> None: ...
+
 
 class InstanceProtocol(Protocol):
     """What the master asks of an FMU instance (:class:`Instance` is the real one; a fake with
@@ -474,6 +478,23 @@ class _Port:
             self.values[:] = values
         if self._n:
             status = self._set(self._component, self._vr, self._n, self._ptr)
+            self.instance.calls += 1
+            if status:
+                self.instance.check(f"fmi2Set{self._type}", status)
+
+    def get_first(self, count: int) -> np.ndarray:
+        """fmi2Get of the first ``count`` variables only (one call), into ``values[:count]``."""
+        if count:
+            status = self._get(self._component, self._vr, count, self._ptr)
+            self.instance.calls += 1
+            if status:
+                self.instance.check(f"fmi2Get{self._type}", status)
+        return self.values[:count]
+
+    def set_first(self, count: int) -> None:
+        """fmi2Set of the first ``count`` variables only (one call), from ``values[:count]``."""
+        if count:
+            status = self._set(self._component, self._vr, count, self._ptr)
             self.instance.calls += 1
             if status:
                 self.instance.check(f"fmi2Set{self._type}", status)

@@ -195,6 +195,14 @@ class StabilityGuard:
         #: largest communication step / impact time scale seen in contact, per plain-law contact
         self.step_over_time_scale = {lv.name: 0.0 for lv in self.levels if not lv.resolved}
 
+    def watched_columns(self) -> list[str]:
+        """The Real outputs the guard reads after every step."""
+        cols = self.system.columns
+        out = [cols[i] for i in self._i_input + self._i_external + self._i_mech]
+        for lv in self.levels:
+            out += [cols[i] for i in (lv.i_delta, lv.i_F, lv.i_vimp, lv.i_Ediss, lv.iv1, lv.iv2)]
+        return out
+
     def _update_limits(self) -> None:
         E = self.E_avail
         self._limits = [self.penetration_factor * ((lv.law.n + 1.0) * E / lv.law.k) ** (1.0 / (lv.law.n + 1.0))

@@ -23,9 +23,10 @@ from .interface import FmuInterface, interfaces, parameter_defaults
 from .names import base_name, element, element_name
 from .scene import SCENES, ContactLevel, InstanceSpec, Override, Scene, SceneError, as_override
 
-TOP_LEVEL = ("name", "description", "stop_time", "step", "coupling", "ground", "buildings", "pounding")
+TOP_LEVEL = ("name", "description", "stop_time", "step", "coupling", "output_interval", "ground", "buildings",
+             "pounding")
 #: top-level keys a --set may change
-SETTABLE = ("name", "description", "stop_time", "step", "coupling")
+SETTABLE = ("name", "description", "stop_time", "step", "coupling", "output_interval")
 POUNDING_MASTER_KEYS = ("floors", "allow_initial_overlap")
 
 
@@ -121,7 +122,7 @@ class _Builder:
         self._apply_contact_overrides(contact_overrides, ground, buildings, contacts)
         self._contact_defaults(levels, contacts, buildings)
         scene = Scene(name, description, stop_time, step, coupling, ground, buildings, contacts, levels,
-                      allow_overlap, self.path, dict(self.fmus))
+                      allow_overlap, self.path, dict(self.fmus), output_interval=self._output_interval())
         self._check_initial_gaps(scene)
         return scene
 
@@ -189,6 +190,16 @@ class _Builder:
         if coupling not in COUPLINGS:
             raise self.error(f"coupling = {coupling!r} is not one of {', '.join(COUPLINGS)}", "coupling")
         return name, description, stop_time, step, coupling
+
+    def _output_interval(self) -> float | None:
+        """``output_interval`` (s, >= 0; 0: every communication point), None when not given."""
+        if "output_interval" not in self.raw:
+            return None
+        value = self.raw["output_interval"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            raise self.error(f"output_interval = {value!r} must be a number >= 0 (s; 0: every communication "
+                             f"point)", "output_interval")
+        return float(value)
 
     def _contacts(self, buildings: list[InstanceSpec]) -> tuple[list[InstanceSpec], list[ContactLevel], bool]:
         """One contact instance per adjacent pair of buildings and pounding level."""

@@ -80,11 +80,22 @@ class SimulationResult:
     cost: Cost
     instances: list[str] = field(default_factory=list)
     stats: dict[str, Any] = field(default_factory=dict)   # strategy-specific counters (adaptive)
+    #: every output at the end of the run (column -> value)
+    final: dict[str, float] = field(default_factory=dict)
+    #: column -> (peak, time of the step end it was reached): |x[i]|, |base_shear| of the
+    #: buildings, F and delta (signed) of the contacts, taken from every step
+    peaks: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: contact -> [(start, end) of every step in which its impacts counter grew]
+    onsets: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
+    #: s, the history's row spacing (0: every communication point)
+    output_interval: float = 0.0
+    #: every output at t0, after initialisation (column -> value)
+    initial: dict[str, float] = field(default_factory=dict)
 
     @property
     def energy_residual_J(self) -> float:
         """Energy balance residual at the end (J), see the module docstring."""
-        return float(energy_history(self)["residual"][-1])
+        return float(final_energies(self)["residual"])
 
     def __getitem__(self, column: str) -> np.ndarray:
         try:
@@ -94,6 +105,16 @@ class SimulationResult:
 
     def has(self, column: str) -> bool:
         return column in self.columns
+
+    def value_at_end(self, column: str) -> float:
+        """The output's value at the end of the run (the final read, else the last row)."""
+        if column in self.final:
+            return float(self.final[column])
+        return float(self[column][-1]) if self.has(column) else 0.0
+
+    def known(self, column: str) -> bool:
+        """True if the run has this output (recorded or read at the end)."""
+        return column in self.final or self.has(column)
 
 
 @dataclass(frozen=True)
@@ -216,11 +237,13 @@ class RunResult:
 
 
 def _final(result: SimulationResult, name: str) -> float:
-    return float(result[name][-1]) if result.has(name) else 0.0
+    return result.value_at_end(name)
 
 
 def impact_times(result: SimulationResult, contact: str) -> np.ndarray:
     """End times (s) of the communication steps in which ``contact`` counted a new impact."""
+    if contact in result.onsets:
+        return np.array([end for _, end in result.onsets[contact]])
     counts = result[column(contact, "impacts")]
     new = np.flatnonzero(np.diff(counts) > 0) + 1
     return result.time[new]
@@ -231,6 +254,9 @@ def impact_onsets(result: SimulationResult) -> list[float]:
     sorted (the resolved contact's onset lies in that step; the plain law's in the step before)."""
     times = []
     for c in result.scene.contacts:
+        if c.name in result.onsets:
+            times.extend(start for start, _ in result.onsets[c.name])
+            continue
         counts = result[column(c.name, "impacts")]
         new = np.flatnonzero(np.diff(counts) > 0)
         times.extend(float(t) for t in result.time[new])
@@ -261,34 +287,101 @@ def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
     return terms
 
 
+def final_energies(result: SimulationResult) -> dict[str, float]:
+    """The energy balance at the end of the run (J, see the module docstring), from the final
+    values (and the values at t0 for the initial energy)."""
+    scene = result.scene
+    buildings = [b.name for b in scene.buildings]
+    contacts = [c.name for c in scene.contacts]
+
+    def total(instances, variable, at_start=False):
+        out = 0.0
+        for name in instances:
+            col = column(name, variable)
+            if at_start:
+                if col in result.initial:
+                    out += result.initial[col]
+                elif result.has(col):
+                    out += float(result[col][0])
+            elif result.known(col):
+                out += result.value_at_end(col)
+        return out
+
+    initial = total(buildings, "E_kinetic", True) + total(buildings, "E_strain", True)
+    e = dict(initial=initial, input=initial + total(buildings, "E_input"), kinetic=total(buildings, "E_kinetic"),
+             strain=total(buildings, "E_strain"), damping=total(buildings, "E_damping"),
+             contact=total(contacts, "E_dissipated"), external=total(buildings, "E_external"))
+    e["residual"] = e["input"] - (e["kinetic"] + e["strain"] + e["damping"] + e["contact"])
+    return e
+
+
+def _peak(result: SimulationResult, name: str, signed: bool = False) -> float:
+    """The largest value of a column over every step (``signed``: of the value, else of its
+    magnitude), from the run's peaks, else from the recorded rows."""
+    if name in result.peaks:
+        return result.peaks[name][0]
+    values = result[name]
+    return float(np.max(values) if signed else np.max(np.abs(values)))
+
+
 def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
-    fmax = result[column(name, "F_max")] if result.has(column(name, "F_max")) else result[column(name, "F")]
-    delta = result[column(name, "delta")] if result.has(column(name, "delta")) else np.zeros(1)
+    f_max = column(name, "F_max")
+    peak_force = result.value_at_end(f_max) if result.known(f_max) else _peak(result, column(name, "F"), True)
+    if result.has(f_max):      # the running maximum, also where the run's end is not its largest
+        peak_force = max(peak_force, float(np.max(result[f_max])))
     times = impact_times(result, name)
     ratio = result.stats.get("step_over_time_scale", {}).get(name)
-    v_impact = (float(np.max(np.abs(result[column(name, "v_impact")])))
-                if result.has(column(name, "v_impact")) else 0.0)
+    v_col = column(name, "v_impact")
+    v_impact = result.value_at_end(v_col) if result.known(v_col) else 0.0
+    if result.has(v_col):
+        v_impact = max(abs(v_impact), float(np.max(np.abs(result[v_col]))))
+    delta = column(name, "delta")
     return ContactSummary(
         impacts=int(_final(result, column(name, "impacts"))),
-        peak_force_N=float(np.max(fmax)),
-        peak_mean_force_N=float(np.max(result[column(name, "F")])),
+        peak_force_N=float(peak_force),
+        peak_mean_force_N=_peak(result, column(name, "F"), True),
         dissipated_energy_J=_final(result, column(name, "E_dissipated")),
-        max_penetration_m=float(max(0.0, np.max(delta))),
+        max_penetration_m=float(max(0.0, _peak(result, delta, True))) if result.known(delta) else 0.0,
         first_impact_s=float(times[0]) if times.size else None,
         # plain force law: how finely the master sampled its impacts
         step_over_time_scale=float(ratio) if ratio is not None else None,
-        peak_impact_velocity_m_s=v_impact)
+        peak_impact_velocity_m_s=abs(v_impact))
+
+
+def _in_step_peaks(result: SimulationResult, name: str, variable: str, n: int) -> np.ndarray | None:
+    """A building's running peaks located inside the steps (``x_peak``, ``drift_peak``) at the
+    end of the run, or None if the building does not output them."""
+    cols = [column(name, element_name(variable, i)) for i in range(1, n + 1)]
+    if all(c in result.final for c in cols):
+        return np.array([result.final[c] for c in cols])
+    return None
 
 
 def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSummary:
-    x = np.abs(np.column_stack([result[column(name, element_name("x", i))] for i in range(1, n + 1)]))
-    d = np.abs(np.column_stack([result[column(name, element_name("drift", i))] for i in range(1, n + 1)]))
-    kx, fx = np.unravel_index(np.argmax(x), x.shape)
-    kd, fd = np.unravel_index(np.argmax(d), d.shape)
+    """Peaks of a building: the largest of those located inside the steps by the building
+    (``x_peak``, ``drift_peak``) and those seen at the step ends; the time of the peak
+    displacement is the step end where that floor's largest sampled ``|x|`` was seen."""
+    xs = [column(name, element_name("x", i)) for i in range(1, n + 1)]
+    if all(c in result.peaks for c in xs):
+        sampled = np.array([result.peaks[c][0] for c in xs])
+        sampled_time = np.array([result.peaks[c][1] for c in xs])
+    else:
+        x = np.abs(np.column_stack([result[c] for c in xs]))
+        rows = np.argmax(x, axis=0)
+        sampled = x[rows, np.arange(n)]
+        sampled_time = result.time[rows]
+    in_step = _in_step_peaks(result, name, "x_peak", n)
+    peaks = sampled if in_step is None else np.maximum(sampled, in_step)
+    fx = int(np.argmax(peaks))
+    drift = _in_step_peaks(result, name, "drift_peak", n)
+    if drift is None:
+        d = np.abs(np.column_stack([result[column(name, element_name("drift", i))] for i in range(1, n + 1)]))
+        drift = np.max(d, axis=0)
+    fd = int(np.argmax(drift))
     return BuildingSummary(
-        n_storeys=n, peak_displacement_m=float(x[kx, fx]), peak_displacement_floor=int(fx + 1),
-        peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[kd, fd]),
-        peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))))
+        n_storeys=n, peak_displacement_m=float(peaks[fx]), peak_displacement_floor=fx + 1,
+        peak_displacement_time_s=float(sampled_time[fx]), peak_drift_m=float(drift[fd]),
+        peak_drift_storey=fd + 1, peak_base_shear_N=_peak(result, column(name, "base_shear")))
 
 
 def summarize(result: SimulationResult) -> Summary:
@@ -296,9 +389,9 @@ def summarize(result: SimulationResult) -> Summary:
     scene = result.scene
     contacts = {c.name: _contact_summary(result, c.name) for c in scene.contacts}
     buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name)) for b in scene.buildings}
-    e = energy_history(result)
-    energy_in = float(e["input"][-1])
-    residual = float(e["residual"][-1])
+    e = final_energies(result)
+    energy_in = e["input"]
+    residual = e["residual"]
     return Summary(
         scene=scene.name, description=scene.description, coupling=result.strategy, step_s=scene.step,
         stop_time_s=float(result.time[-1]), instances=list(result.instances),
@@ -306,9 +399,9 @@ def summarize(result: SimulationResult) -> Summary:
         impacts=sum(c.impacts for c in contacts.values()),
         dissipated_energy_J=sum(c.dissipated_energy_J for c in contacts.values()),
         buildings=buildings, contacts=contacts,
-        energy_initial_J=float(e["input"][0]), energy_input_J=energy_in, energy_kinetic_J=float(e["kinetic"][-1]),
-        energy_strain_J=float(e["strain"][-1]), energy_damping_J=float(e["damping"][-1]),
-        energy_contact_J=float(e["contact"][-1]), energy_residual_J=residual,
+        energy_initial_J=e["initial"], energy_input_J=energy_in, energy_kinetic_J=e["kinetic"],
+        energy_strain_J=e["strain"], energy_damping_J=e["damping"],
+        energy_contact_J=e["contact"], energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
         cost=result.cost, warnings=sampling_warnings(contacts))
 

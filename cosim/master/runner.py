@@ -27,9 +27,11 @@ DEFAULT_SCENE = "default"
 
 
 def settings(coupling: str | None = None, step: float | None = None,
-             stop_time: float | None = None) -> list[Override]:
+             stop_time: float | None = None, output_interval: float | None = None) -> list[Override]:
     """The top-level overrides of a run's settings (typed; None leaves the scene's)."""
     out = []
+    if output_interval is not None:
+        out.append(Override(None, "output_interval", float(output_interval)))
     if coupling is not None:
         out.append(Override(None, "coupling", str(coupling)))
     if step is not None:
@@ -43,12 +45,14 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
               out: str | Path | None = None, coupling: str | None = None, step: float | None = None,
               stop_time: float | None = None, fmu_dir: str | Path | None = None,
               catalog: Catalog | None = None, write: bool = True, plots: bool = True,
-              progress: bool | None = None, **strategy_options: Any) -> RunResult:
+              progress: bool | None = None, output_interval: float | None = None,
+              record: str | Sequence[str] = "summary", **strategy_options: Any) -> RunResult:
     """Load, validate and run a scene; write its results unless ``write=False``.
 
     ``overrides``: :class:`~cosim.master.scene.Override` objects (or their text form,
     ``"pounding.gap=0.02"``); ``coupling``, ``step`` (s), ``stop_time`` (s) replace the
-    scene's; ``strategy_options`` go to the coupling strategy.  Raises
+    scene's; ``output_interval`` (s) and ``record`` say what the history keeps
+    (:func:`cosim.master.simulate.simulate`); ``strategy_options`` go to the coupling strategy.  Raises
     :class:`~cosim.master.scene.SceneError` (invalid scene or override) or
     :class:`~cosim.master.fmi.FMUError` (an FMU refused a parameter or a step) before
     anything is written, :class:`~cosim.master.guard.InstabilityError` when the stability
@@ -58,9 +62,9 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
     if own_catalog:
         catalog = Catalog(fmu_dir if fmu_dir is not None else default_fmu_dir())
     try:
-        loaded = load_scene(scene, list(overrides) + settings(coupling, step, stop_time), catalog)
+        loaded = load_scene(scene, list(overrides) + settings(coupling, step, stop_time, output_interval), catalog)
         with System(loaded, catalog) as system:
-            result = simulate(system, progress=progress, **strategy_options)
+            result = simulate(system, progress=progress, record=record, **strategy_options)
     finally:
         if own_catalog:
             catalog.close()

@@ -28,8 +28,10 @@ A scene reads like the system it describes::
 Rules (checked by :func:`cosim.master.loader.load_scene` before anything is instantiated,
 each a one-line :class:`SceneError` naming the file, the line, the table and the key):
 
-* Top-level keys: ``name description stop_time step coupling ground
-  buildings pounding``; anything else is an error.
+* Top-level keys: ``name description stop_time step coupling output_interval ground
+  buildings pounding``; anything else is an error.  ``output_interval`` (s, >= 0, default
+  the step; 0: every communication point) spaces the history's rows
+  (:mod:`cosim.master.recording`).
 * ``[ground]`` keys are ``ground_motion.fmu`` parameters.  Without the table
   no ground-motion FMU is instantiated (free vibration).
 * ``[buildings.<name>]`` keys are ``building.fmu`` parameters.  An array
@@ -202,6 +204,8 @@ class Scene:
     allow_initial_overlap: bool = False
     path: Path | None = None
     interfaces: dict[str, FmuInterface] | None = field(default=None, repr=False, compare=False)
+    #: s, at most one history row per interval (None: the step; 0: every communication point)
+    output_interval: float | None = None
 
     @property
     def source(self) -> str:

@@ -1,50 +1,32 @@
-"""The run loop: a coupling strategy advances a system, the guard watches, a recorder keeps every output.
+"""The run loop: a coupling strategy advances a system, the guard watches, a recorder keeps what is asked.
 
 :func:`simulate` initialises a :class:`~cosim.master.system.System`, steps it with a
 coupling strategy (:mod:`cosim.master.coupling`) from t = 0 to the stop time, checks every
-accepted step with the stability guard (:mod:`cosim.master.guard`) and returns a
-:class:`~cosim.master.results.SimulationResult` (history and cost).
+accepted step with the stability guard (:mod:`cosim.master.guard`), keeps what
+:mod:`cosim.master.recording` says (rows at the output interval, peaks and impact onsets of
+every step, the final values) and returns a :class:`~cosim.master.results.SimulationResult`
+(history, peaks, final values and cost).
 """
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
 from .coupling import get_strategy
 from .guard import StabilityGuard
+from .recording import Recorder, recorded_columns, tracked_columns
 from .results import Cost, SimulationResult
 
 if TYPE_CHECKING:
     from .system import System
 
 
-class Recorder:
-    """Preallocated history of (t, y, ints), grown by doubling for variable steps."""
-
-    def __init__(self, system: "System", capacity: int):
-        self.system = system
-        self.n_y = system.y.size
-        self.time = np.empty(max(capacity, 2))
-        self.values = np.empty((max(capacity, 2), self.n_y + system.ints.size))
-        self.count = 0
-
-    def record(self, t: float) -> None:
-        if self.count == self.time.size:
-            self.time = np.resize(self.time, 2 * self.time.size)
-            self.values = np.resize(self.values, (2 * self.values.shape[0], self.values.shape[1]))
-        k = self.count
-        self.time[k] = t
-        row = self.values[k]
-        row[:self.n_y] = self.system.y
-        row[self.n_y:] = self.system.ints
-        self.count += 1
-
-
 def simulate(system: "System", strategy: str | type | None = None, stop_time: float | None = None,
              step: float | None = None, progress: bool | None = None,
              callback: Callable[[float], None] | None = None, check_stability: bool = True,
+             output_interval: float | None = None, record: str | Sequence[str] = "summary",
              **options: Any) -> SimulationResult:
     """Initialise ``system`` and run it from t0 = 0 to ``stop_time`` with a coupling strategy.
 
@@ -52,7 +34,11 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     :class:`~cosim.master.coupling.base.CouplingStrategy` subclass (default: the scene's
     ``coupling``); ``step``: communication step (s, default: the scene's);
     ``progress``: tqdm bar (None = shown if the run lasts over 2 s).
-    ``options`` go to the strategy's constructor.  ``check_stability``: after every
+    ``output_interval`` (s): at most one history row per interval (default: the scene's
+    ``output_interval``, else its step; 0: every communication point); ``record``: the recorded
+    columns, ``"summary"`` (what the summary and the plots use), ``"all"`` or a list
+    (:mod:`cosim.master.recording`); peaks and impact onsets are taken from every step whatever
+    is recorded.  ``options`` go to the strategy's constructor.  ``check_stability``: after every
     step, :class:`cosim.master.guard.StabilityGuard` raises
     :class:`cosim.master.guard.InstabilityError` (saying what to change) when the run has
     produced non-finite values, a penetration beyond physical sense or created energy.
@@ -60,6 +46,9 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     scene = system.scene
     stop_time = scene.stop_time if stop_time is None else float(stop_time)
     step = scene.step if step is None else float(step)
+    if output_interval is None:
+        output_interval = getattr(scene, "output_interval", None)
+    output_interval = step if output_interval is None else float(output_interval)
     cls = get_strategy(strategy or scene.coupling)
     if system.initialized:
         system.reset()
@@ -71,8 +60,19 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     guard = None
     if check_stability:
         guard = StabilityGuard(system)
-    recorder = Recorder(system, int(np.ceil(stop_time / step)) + 2)
-    recorder.record(0.0)
+    recorder = Recorder(system, stop_time, output_interval, recorded_columns(system, record))
+    watched = set(solver.watched_columns()) | set(tracked_columns(system))
+    if guard is not None:
+        watched |= set(guard.watched_columns())
+    system.watch(watched, set(recorder.columns))
+    plan = system.plan
+
+    def before_step(t_next: float) -> None:
+        plan.rows = recorder.due(t_next)
+
+    solver.on_step = before_step
+    recorder.start(0.0)
+    initial = dict(zip(system.columns, np.concatenate((system.y, system.ints)).tolist()))
     bar = None
     if progress is not False:
         from tqdm import tqdm
@@ -83,15 +83,23 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     shown = 0.0
     try:
         while solver.status == "running":
+            t_start = solver.t
+            plan.rows = True                   # a strategy that does not say where it steps reads all
             solver.step()
             if guard is not None:
                 guard.check(solver.t, getattr(solver, "h_last", solver.h))
-            recorder.record(solver.t)
+            recorder.track(t_start, solver.t)
+            if plan.rows and recorder.due(solver.t):
+                recorder.read_ints()
+                recorder.record(solver.t)
             if callback is not None:
                 callback(solver.t)
             if bar is not None and solver.t - shown >= 0.01 * stop_time:
                 bar.update(solver.t - shown)
                 shown = solver.t
+        solver.finish()
+        for node in system.nodes:              # the final value of every output
+            node.push_all()
     finally:
         if bar is not None:
             bar.close()
@@ -99,10 +107,13 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     stats = dict(getattr(solver, "stats", {}))
     if guard is not None and guard.step_over_time_scale:
         stats["step_over_time_scale"] = dict(guard.step_over_time_scale)
-    k = recorder.count
     cost = Cost(wall_time_s=wall, communication_steps=solver.communication_steps, rollbacks=solver.rollbacks,
                 fmu_calls=system.fmu_calls() - calls_before,
                 do_steps={n: v - steps_before.get(n, 0) for n, v in system.do_steps().items()})
+    times, values = recorder.history()
+    final = dict(zip(system.columns, np.concatenate((system.y, system.ints)).tolist()))
     return SimulationResult(
-        scene=scene, strategy=cls.name, time=recorder.time[:k].copy(), columns=list(system.columns),
-        values=recorder.values[:k].copy(), cost=cost, instances=[n.name for n in system.nodes], stats=stats)
+        scene=scene, strategy=cls.name, time=times, columns=list(recorder.columns), values=values, cost=cost,
+        instances=[n.name for n in system.nodes], stats=stats, final=final, peaks=recorder.peaks(),
+        onsets={name: list(v) for name, v in recorder.onsets.items()}, output_interval=output_interval,
+        initial=initial)

@@ -67,13 +67,29 @@ class Catalog(Mapping[str, FMU]):
         self.close()
 
 
+class ReadPlan:
+    """What the nodes read after a step (shared by the nodes of a system): ``rows`` is True for
+    a step whose end is recorded (:class:`cosim.master.recording.Recorder`), when each node
+    reads its recorded outputs together with the watched ones, in the same call."""
+
+    __slots__ = ("rows",)
+
+    def __init__(self) -> None:
+        self.rows = True
+
+
 @dataclass
 class Node:
     """One instance in the system: its ports and its input map.
 
-    ``outputs.values`` is a view of ``System.y``; ``inputs`` are set from
-    ``A @ y`` by :meth:`pull`.  ``integers`` and ``booleans`` hold the Integer
-    (impacts) and Boolean (in_contact) outputs, views of ``System.ints``.
+    ``outputs.values`` is a view of ``System.y`` (every Real output); ``inputs`` are set from
+    ``A @ y`` by :meth:`pull`.  ``integers`` and ``booleans`` hold the Integer (impacts) and
+    Boolean (in_contact) outputs, views of ``System.ints``.
+
+    A run reads only what it needs (:meth:`System.watch`): after every step the outputs the
+    coupling, the guard and the summary need (``watched``, scattered into ``y`` at
+    ``watched_index``), at recorded steps those and the recorded ones (``rows``), one
+    ``fmi2GetReal`` either way.  Without a plan every output is read (``outputs``).
     """
 
     spec: "InstanceSpec"
@@ -84,19 +100,89 @@ class Node:
     inputs: PortProtocol
     A: np.ndarray
     kind: str                   # the FMU's role: "ground", "contact" or "building"
+    y: np.ndarray | None = None
+    plan: ReadPlan | None = None
+    watched: PortProtocol | None = None
+    watched_index: np.ndarray | None = None
+    rows: PortProtocol | None = None
+    rows_index: np.ndarray | None = None
+    #: building with knot inputs: the input port carries [A @ y | t_knot[1], ag_knot[1], ...]
+    knot_offset: int = 0
+    knot_count: PortProtocol | None = None
+    knots_set: int = -1         # n_knots the instance has now (set only when it changes)
+    knot_ag: int = -1           # where the held ``ag`` input sits in the input port (-1: none)
 
     @property
     def name(self) -> str:
         return self.spec.name
 
+    def __post_init__(self) -> None:
+        # most inputs copy one output with a factor (+-1): a gather is much cheaper than A @ y
+        A = self.A
+        single = A.shape[0] and bool(np.all(np.count_nonzero(A, axis=1) == 1))
+        self._source = np.argmax(A != 0.0, axis=1) if single else None
+        self._factor = A[np.arange(A.shape[0]), self._source] if single else None
+
+    def _inputs(self, y: np.ndarray, out: np.ndarray) -> None:
+        if self._source is not None:
+            np.multiply(y[self._source], self._factor, out=out)
+        else:
+            np.dot(self.A, y, out=out)
+
     def pull(self, y: np.ndarray) -> None:
         """Set the inputs from the current outputs of the system."""
         if self.A.shape[0]:
-            np.dot(self.A, y, out=self.inputs.values)
-            self.inputs.set()
+            self._inputs(y, self.inputs.values[:self.A.shape[0]])
+            if self.knot_count is None:
+                self.inputs.set()
+            else:
+                self.inputs.set_first(self.A.shape[0])
+
+    def pull_with_knots(self, y: np.ndarray, times: np.ndarray, values: np.ndarray) -> None:
+        """Set the inputs and the ground motion over the coming step (one fmi2SetReal, and
+        fmi2SetInteger when the number of knots changes).
+
+        A step inside one record interval (two knots: the record is linear over it) gets the
+        ground acceleration held at its exact mean, ``ag = (a0 + a1) / 2`` with ``n_knots = 0``:
+        the zero-order-hold step of earlier versions (exact velocity increments), which the
+        building takes with one cached matrix product; a step over several intervals gets the
+        knots (first-order hold, exact for the record)."""
+        n_in = self.A.shape[0]
+        buf = self.inputs.values
+        if n_in:
+            self._inputs(y, buf[:n_in])
+        count = times.size
+        if count == 2 and self.knot_ag >= 0:
+            buf[self.knot_ag] = 0.5 * (values[0] + values[1])
+            self.inputs.set_first(n_in)
+            count = 0
+        else:
+            o = self.knot_offset
+            buf[o:o + 2 * count:2] = times
+            buf[o + 1:o + 2 * count:2] = values
+            self.inputs.set_first(o + 2 * count)
+        if count != self.knots_set:
+            self.knot_count.set([count])
+            self.knots_set = count
 
     def push(self) -> None:
-        """Read the outputs (into the system's ``y``)."""
+        """Read the outputs the run watches (into the system's ``y``): one fmi2GetReal."""
+        port = self.watched
+        if port is None:
+            self.outputs.get()
+            self.integers.get()
+            self.booleans.get()
+            return
+        if self.plan.rows:
+            port, index = self.rows, self.rows_index
+        else:
+            index = self.watched_index
+        if index.size:
+            port.get()
+            self.y[index] = port.values
+
+    def push_all(self) -> None:
+        """Read every output (initialisation, the end of a run)."""
         self.outputs.get()
         self.integers.get()
         self.booleans.get()
@@ -122,6 +208,9 @@ class System:
         self.catalog = catalog
         self.nodes: list[Node] = []
         self.t0 = 0.0
+        self.plan = ReadPlan()
+        self._in_names: dict[str, list[str]] = {}
+        self.knots = 0              # knot capacity the buildings' input ports carry (0: none)
         created: list[InstanceProtocol] = []
         try:
             self._build(scene, created)
@@ -182,10 +271,20 @@ class System:
                 inst.variable(name, "input")
             inputs = inst.real_port(in_names[s.name])
             kind = fmu_spec(s.fmu).role
-            self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind))
+            self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind,
+                                   y=self.y, plan=self.plan))
+            self._in_names[s.name] = in_names[s.name]
         self.ground = [n for n in self.nodes if n.kind == "ground"]
         self.contacts = [n for n in self.nodes if n.kind == "contact"]
         self.buildings = [n for n in self.nodes if n.kind == "building"]
+
+    def coupling_sources(self) -> list[str]:
+        """The Real outputs some instance's inputs are computed from (columns of ``y``)."""
+        used = np.zeros(self.y.size, dtype=bool)
+        for n in self.nodes:
+            if n.A.shape[0]:
+                used |= np.any(n.A != 0.0, axis=0)
+        return [self.columns[i] for i in np.flatnonzero(used)]
 
     def node(self, name: str) -> Node:
         for n in self.nodes:
@@ -214,10 +313,49 @@ class System:
         for n in self.ground + self.buildings + self.contacts:
             n.pull(self.y)
             n.instance.exit_initialization()
-            n.push()
+            n.push_all()
         for n in self.buildings:  # contact outputs at t0 (forces are zero unless overlapping)
             n.pull(self.y)
         self.initialized = True
+
+    # -- what a run reads and sends --------------------------------------------------------------
+    def watch(self, watched: "set[str] | None", recorded: "set[str] | None" = None) -> None:
+        """Read only ``watched`` Real columns after every step, and ``watched | recorded`` after
+        a recorded one (:class:`ReadPlan`), each node in one fmi2GetReal; None: every output,
+        as before any plan."""
+        index = {c: i for i, c in enumerate(self.columns[:self.y.size])}
+        for n in self.nodes:
+            if watched is None:
+                n.watched = n.watched_index = n.rows = n.rows_index = None
+                continue
+            mine = [c for c in self.columns[:self.y.size] if c.startswith(n.name + ".")]
+            variable = {c: c[len(n.name) + 1:] for c in mine}
+            w = [c for c in mine if c in watched]
+            r = [c for c in mine if c in watched or (recorded is not None and c in recorded)]
+            n.watched = n.instance.real_port([variable[c] for c in w])
+            n.watched_index = np.array([index[c] for c in w], dtype=np.intp)
+            n.rows = n.instance.real_port([variable[c] for c in r])
+            n.rows_index = np.array([index[c] for c in r], dtype=np.intp)
+        self.plan.rows = True
+
+    def use_knots(self, capacity: int) -> None:
+        """Give every building the ground motion's knots with its inputs (``capacity`` knots,
+        interleaved ``t_knot[k], ag_knot[k]`` after the coupling inputs; :meth:`Node.pull_with_knots`);
+        0: back to the held ``ag`` (``n_knots = 0``)."""
+        for n in self.buildings:
+            names = list(self._in_names[n.name])
+            if capacity:
+                names += [v for k in range(1, capacity + 1) for v in (f"t_knot[{k}]", f"ag_knot[{k}]")]
+            n.inputs = n.instance.real_port(names)
+            n.knot_offset = len(self._in_names[n.name])
+            n.knot_ag = self._in_names[n.name].index("ag") if "ag" in self._in_names[n.name] else -1
+            if capacity:
+                n.knot_count = n.instance.integer_port(["n_knots"])
+                n.knots_set = -1
+            elif n.knot_count is not None:
+                n.knot_count.set([0])
+                n.knot_count = None
+        self.knots = capacity
 
     def reset(self, scene: "Scene | None" = None) -> None:
         """fmi2Reset every instance and apply the parameters of ``scene`` (default:

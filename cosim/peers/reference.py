@@ -70,9 +70,8 @@ from scipy.optimize import minimize_scalar
 
 from fmu_src.contact_laws import law_for
 from fmu_src.ground_records import load_record
-from fmu_src.shear_building import ShearBuilding
 
-from ..master.names import element_name
+from ..master.models import initial_state, shear_building
 
 OPEN, APPROACH, RESTITUTION = "open", "approach", "restitution"
 METHODS = ("DOP853", "Radau", "RK45", "BDF", "LSODA")
@@ -776,18 +775,10 @@ def scene_inputs(scene) -> dict:
     """
     buildings, x0, v0 = [], [], []
     for spec in scene.buildings:
-        n = int(spec.value("n_storeys"))
-        floors = range(1, n + 1)
-        masses = [float(spec.value(element_name("m", i))) for i in floors]
-        stiffnesses = [float(spec.value(element_name("k", i))) for i in floors]
-        T1, zeta, damping = float(spec.value("T1")), float(spec.value("zeta")), spec.value("damping")
-        if T1 > 0.0:
-            building = ShearBuilding.from_period(T1, masses, stiffnesses, zeta, damping)
-        else:
-            building = ShearBuilding(masses, stiffnesses, zeta, damping)
-        buildings.append(building)
-        x0.append(np.array([float(spec.value(element_name("x0", i))) for i in floors]))
-        v0.append(np.array([float(spec.value(element_name("v0", i))) for i in floors]))
+        buildings.append(shear_building(spec))
+        x, v = initial_state(spec)
+        x0.append(np.array(x))
+        v0.append(np.array(v))
 
     ground = None
     if scene.ground is not None:

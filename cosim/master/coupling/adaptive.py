@@ -47,7 +47,13 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from ...fmus import POUNDING, fmu_spec
+from ..dormancy import Dormancy
+from ..gap_bound import OpenGaps, constant_bound, running_max_abs
 from ..guard import contact_levels
+from ..knots import GroundLookahead
 from .base import CouplingStrategy
 
 if TYPE_CHECKING:
@@ -74,6 +80,14 @@ def closure_time(delta: float, delta_dot: float, accel_bound: float) -> float:
 
 
 # -- the strategy ----------------------------------------------------------------------------------
+#: base steps one catch-up step of a waking contact spans at most (:mod:`cosim.master.dormancy`):
+#: the resolver predicts a step's flight from the structures' motion over its previous step,
+#: which holds over a few base steps (default scene: no catch-up redone at 4, 9 of 12 at 16)
+CATCH_UP_STEPS = 4
+#: base steps a proof with no contact force looks ahead (a proof costs about as much as an FMI
+#: call or two; a longer horizon is valid longer where the gaps are wide, and no shorter where
+#: they are not)
+QUIET_HORIZON = 8
 #: contact step / impact time scale, by contact mode (chosen from docs/accuracy.md)
 CONTACT_FRACTION_RESOLVED = 1.0 / 2.0
 CONTACT_FRACTION_PLAIN = 1.0 / 64.0
@@ -89,7 +103,8 @@ def default_contact_fraction(levels) -> float:
 class Adaptive(CouplingStrategy):
     """Gauss-Seidel with dyadic adaptive communication steps and rollback (module docstring).
 
-    Parameters (besides the base class's; ``step`` is the largest step ``h_max``, s)
+    Parameters (besides the base class's; ``step`` is the base step ``h_base``, s: the longest
+    step near a possible contact)
     ----------
     contact_fraction : float, optional
         Step in contact (and for the step that closes a gap) as a fraction of the impact's
@@ -100,21 +115,39 @@ class Adaptive(CouplingStrategy):
         and dissipated energy of the default scene within 1 % and 2 % of the reference).
         Both from the accuracy study, docs/accuracy.md.
     max_halvings : int
-        Smallest step ``h_max / 2**max_halvings`` (default 16).
+        Smallest step ``h_base / 2**max_halvings`` (default 16).
     accel_safety : float
         Factor on the current relative acceleration in the closure bound (default 2).
     risk_factor : float
         States are saved before a step if the gap may close within ``risk_factor`` steps.
+    knots : bool
+        Hand the buildings the ground motion's knots (exact for the record over any step) with
+        the ground motion read ahead in chunks (:mod:`cosim.master.knots`); default True (when
+        the FMUs have knots).  False: the ground steps with every step and the buildings hold
+        its step mean ``ag_mean``.
+    dormancy : bool
+        No call to a contact FMU over a step in which its gap provably stays open
+        (:mod:`cosim.master.dormancy`); default True.
+    long_steps : bool, optional
+        Steps of up to ``max_long_step`` where every gap provably stays open for the step and
+        one base step more; default: when every contact FMU takes such steps
+        (:attr:`cosim.fmus.FmuSpec.long_quiet_steps`, or ``resolve_impacts = false``).
+    max_long_step : float
+        Longest step (s), rounded down to ``h_base`` times a power of 2 (default 0.32 s: 32
+        samples of a 100 Hz record, what the FMUs' 33 knots carry).
 
     Counters: ``communication_steps`` (accepted), ``rollbacks`` (rejected and retried),
-    ``stats`` (``saved_states``, ``missed_events``, ``h_min_used``, ``h_max_used``).
+    ``stats`` (``saved_states``, ``missed_events``, ``h_min_used``, ``h_max_used``, ``long_steps``,
+    ``proofs``, ``dormant_steps``, ``catch_ups``, ``catch_up_steps``, ``catch_up_replays``,
+    ``ground_steps``).
     """
 
     name = "adaptive"
 
     def __init__(self, system: "System", t0: float, t_bound: float, step: float, *,
                  contact_fraction: float | None = None, max_halvings: int = 16, accel_safety: float = 2.0,
-                 risk_factor: float = 2.0):
+                 risk_factor: float = 2.0, knots: bool = True, dormancy: bool = True,
+                 long_steps: bool | None = None, max_long_step: float = 0.32, catch_up_span: float | None = None):
         super().__init__(system, t0, t_bound, step)
         self.levels = contact_levels(system)
         if contact_fraction is None:
@@ -123,25 +156,88 @@ class Adaptive(CouplingStrategy):
             raise ValueError(f"contact_fraction = {contact_fraction!r} must be in (0, 1]")
         if not (isinstance(max_halvings, int) and 0 <= max_halvings <= 40):
             raise ValueError(f"max_halvings = {max_halvings!r} must be an integer in 0..40")
+        if not (max_long_step > 0.0 and math.isfinite(max_long_step)):
+            raise ValueError(f"max_long_step = {max_long_step!r} s must be > 0")
         self.contact_fraction = float(contact_fraction)
         self.max_halvings = max_halvings
         self.accel_safety = float(accel_safety)
         self.risk_factor = float(risk_factor)
-        self.h_max = self.h
+        self.h_max = self.h                                 # the base step
         self.h_min = self.h_max / 2 ** max_halvings
         self._tick = 0                                     # time = t0 + tick * h_min
         self._end_tick = max(1, math.ceil((self.t_bound - self.t0) / self.h_min - 1e-9))
-        self._level = 0                                    # level of the last step (0: h_max)
-        self._order = system.ground + system.contacts + system.buildings
+        self._level = 0                                    # level of the last step (0: h_max, < 0: long)
         self._i_pga = None
         if system.ground:
             self._i_pga = system.columns.index(f"{system.ground[0].name}.pga")
         self.h_last = self.h_max
-        self.stats = dict(saved_states=0, missed_events=0, h_min_used=math.inf, h_max_used=0.0)
+        self.stats = dict(saved_states=0, missed_events=0, h_min_used=math.inf, h_max_used=0.0, long_steps=0,
+                          proofs=0, ground_steps=0)
+        # the ground motion as knots, read ahead
+        self._look = None
+        capacity = self._knot_capacity() if knots else 0
+        if capacity:
+            self._look = GroundLookahead(system.ground[0], capacity, self.h_max,
+                                         self.h_max * 2 ** max(0, int(math.floor(math.log2(max_long_step / self.h_max)
+                                                                                  + 1e-9))), self.t_bound)
+            self._look.start(self.t0)
+            system.use_knots(capacity)
+        else:
+            system.use_knots(0)
+        # the proof that gaps stay open, dormant contacts, long steps
+        self._gaps = OpenGaps.build(system, self.levels) if (dormancy or long_steps is not False) else None
+        if catch_up_span is None:
+            catch_up_span = CATCH_UP_STEPS * self.h_max
+        self._dormancy = Dormancy(system, self.stats, catch_up_span) if (dormancy and self._gaps is not None) else None
+        if long_steps is None:
+            long_steps = all(not lv.resolved for lv in self.levels) or fmu_spec(POUNDING).long_quiet_steps
+        self.long_levels = 0
+        if long_steps and self._gaps is not None and (self._look is not None or not system.ground):
+            self.long_levels = max(0, int(math.floor(math.log2(max_long_step / self.h_max) + 1e-9)))
+        self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
+
+    def _knot_capacity(self) -> int:
+        """Knots the ground FMU gives and every building takes (0: no knots)."""
+        system = self.system
+        if not system.ground or not system.buildings:
+            return 0
+        ground = system.ground[0].instance
+
+        def size(instance, name, causality):
+            count = 0
+            while True:
+                try:
+                    instance.variable(f"{name}[{count + 1}]", causality)
+                except (KeyError, ValueError):
+                    return count
+                count += 1
+        try:
+            ground.variable("n_knots", "output")
+            for b in system.buildings:
+                b.instance.variable("n_knots", "input")
+        except (KeyError, ValueError):
+            return 0
+        capacity = size(ground, "t_knot", "output")
+        for b in system.buildings:
+            capacity = min(capacity, size(b.instance, "t_knot", "input"))
+        return capacity if capacity >= 2 else 0
+
+    def watched_columns(self) -> list[str]:
+        """The coupling's sources, each contact level's floors (x, v, a) and contact outputs (F,
+        delta, v_impact), and every floor's x, v for the proof that gaps stay open."""
+        system = self.system
+        cols = system.columns
+        out = [c for c in system.coupling_sources() if not (self._look is not None and c.startswith(
+            system.ground[0].name + "."))]
+        for lv in self.levels:
+            out += [cols[i] for i in (lv.ix1, lv.iv1, lv.ia1, lv.ix2, lv.iv2, lv.ia2, lv.i_F, lv.i_delta, lv.i_vimp)]
+        if self._gaps is not None:
+            out += self._gaps.columns(system)
+        return out
 
     # -- step choice -------------------------------------------------------------------------
     def _dyadic_level(self, h_target: float) -> int:
-        """Smallest level ``j`` with ``h_max / 2**j <= h_target`` (capped at ``max_halvings``)."""
+        """Smallest level ``j >= 0`` with ``h_max / 2**j <= h_target`` (capped at ``max_halvings``)."""
         if h_target >= self.h_max:
             return 0
         if h_target <= self.h_min:
@@ -153,6 +249,11 @@ class Adaptive(CouplingStrategy):
         while level < self.max_halvings and self._tick % (1 << (self.max_halvings - level)):
             level += 1
         return level
+
+    def _active(self, lv) -> bool:
+        """A contact that has something to do now: a force, a closed gap (its own or the host's)."""
+        y = self.system.y
+        return y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or lv.kinematics(y)[0] >= 0.0
 
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, risky)``: the longest safe step (s) and whether a closure may fall in it."""
@@ -174,6 +275,47 @@ class Adaptive(CouplingStrategy):
                 closures.append(s)
         return h_target, closures
 
+    # -- the proof that gaps stay open ---------------------------------------------------------------
+    def _ground_bound(self, t: float, H: float):
+        """``|ag|`` bound ahead (:func:`~cosim.master.gap_bound.running_max_abs`): from the knots
+        read ahead, else the record's peak (the ground's ``pga`` output), else 0."""
+        if self._look is None:
+            return constant_bound(self.system.y.item(self._i_pga) if self._i_pga is not None else 0.0)
+        self._look.cover(t + H)
+        return running_max_abs(self._look.times, self._look.values, t, H)
+
+    def _prove_quiet(self, t: float, H: float) -> float:
+        """With no contact active: how long (s, <= H) every gap provably stays open from ``t``
+        with no contact force; each contact's proof is then valid until ``t`` plus that."""
+        ground = self._ground_bound(t, H)
+        if ground is None:
+            return 0.0
+        self.stats["proofs"] += 1
+        s = min(self._gaps.horizons(self.system.y, H, ground), default=H)
+        self._proven = [t + s] * len(self.levels)
+        return s
+
+    def _long_level(self, t: float) -> int:
+        """The longest aligned long level (< 0) whose step and one base step more stay inside
+        every gap's proof, or 0."""
+        aligned = [lvl for lvl in range(-self.long_levels, 0)
+                   if self._tick % (1 << (self.max_halvings - lvl)) == 0]
+        if not aligned:
+            return 0
+        remaining = self.t_bound - t
+        H = min(self.h_max * 2 ** -aligned[0], remaining) + self.h_max
+        if min(self._proven, default=math.inf) < t + H:
+            self._prove_quiet(t, H)
+        safe = min(self._proven, default=math.inf) - t - self.h_max
+        capacity = self._look.capacity if self._look is not None else None
+        for lvl in aligned:
+            h = self.h_max * 2 ** -lvl
+            if h > remaining + self.h_min:
+                continue
+            if h <= safe and (capacity is None or self._look.knots_in(t, min(t + h, self.t_bound)) <= capacity):
+                return lvl
+        return 0
+
     # -- one accepted step ---------------------------------------------------------------------
     def step(self) -> None:
         if self.status != "running":
@@ -185,17 +327,22 @@ class Adaptive(CouplingStrategy):
         while True:
             h_target, closures = self._plan()
             level = max(self._dyadic_level(min(h_target, cap)), finest)
-            level = max(level, self._level - 1)                  # grow by at most a factor 2
+            level = max(level, max(self._level, 0) - 1)          # grow by at most a factor 2 (below h_base)
             level = self._aligned(level)
+            t = self.t0 + self._tick * self.h_min
+            if (level == 0 and self.long_levels and cap == math.inf
+                    and not any(self._active(lv) for lv in self.levels)):
+                level = self._long_level(t)
             n_ticks = 1 << (self.max_halvings - level)
             end_tick = min(self._tick + n_ticks, self._end_tick)
-            t = self.t0 + self._tick * self.h_min
             t_next = self.t_bound if end_tick >= self._end_tick else self.t0 + end_tick * self.h_min
             h = t_next - t
-            risky = level < self.max_halvings and any(s < self.risk_factor * h for s in closures)
+            # a long step (level < 0) is proven free of closures
+            risky = 0 <= level < self.max_halvings and any(s < self.risk_factor * h for s in closures)
             if risky and saved is None:
                 saved = self._save()
             start = [lv.kinematics(system.y) for lv in self.levels]
+            self._before(t_next)
             self._advance(t, h)
             retry = self._retry_step(start, h)
             if retry is None:
@@ -204,15 +351,19 @@ class Adaptive(CouplingStrategy):
                 self._restore(saved)
                 self.rollbacks += 1
                 cap = retry
-                finest = min(level + 1, self.max_halvings)
+                finest = min(max(level, 0) + 1, self.max_halvings)
                 continue
             self.stats["missed_events"] += 1
             break
         if saved is not None:
             self._free(saved)
+        if self._dormancy is not None:
+            self._dormancy.commit()
         self._tick = end_tick
         self._level = level
         self.h_last = h
+        if level < 0:
+            self.stats["long_steps"] += 1
         self.stats["h_min_used"] = min(self.stats["h_min_used"], h)
         self.stats["h_max_used"] = max(self.stats["h_max_used"], h)
         self.communication_steps += 1
@@ -221,9 +372,93 @@ class Adaptive(CouplingStrategy):
             self.status = "finished"
 
     def _advance(self, t: float, h: float) -> None:
+        system = self.system
+        y = system.y
+        look = self._look
+        if look is not None:
+            look.drop_before(t)
+            look.cover(t + h)
+            self.stats["ground_steps"] = look.ground_steps
+        else:
+            for node in system.ground:
+                node.step(y, t, h)
+        if self._dormancy is None:
+            for node in system.contacts:
+                node.step(y, t, h)
+        else:
+            self._step_contacts(t, h)
+        if look is not None:
+            times, values = look.slice(t, t + h)
+            for node in system.buildings:
+                node.pull_with_knots(y, times, values)
+                node.instance.do_step(t, h)
+                node.push()
+        else:
+            for node in system.buildings:
+                node.step(y, t, h)
+
+    def _step_contacts(self, t: float, h: float) -> None:
+        """Step every contact that may have something to do over ``[t, t + h]``; the others
+        sleep (:mod:`cosim.master.dormancy`), proven open with the forces of those that step."""
+        system, y, dormancy = self.system, self.system.y, self._dormancy
+        t1 = t + h
+        pending = []
+        for k, (lv, node) in enumerate(zip(self.levels, system.contacts)):
+            if self._active(lv):
+                dormancy.wake(node)
+                node.step(y, t, h)
+            else:
+                pending.append(k)
+        if pending and len(pending) == len(self.levels) and any(self._proven[k] < t1 for k in pending):
+            # no force anywhere: one proof for every gap, over a few base steps ahead (it holds
+            # as long as it says: no gap closes before it ends, so no force appears)
+            self._prove_quiet(t, min(max(h, QUIET_HORIZON * self.h_max), self.t_bound - t))
+        while pending:
+            doubtful = [k for k in pending if self._proven[k] < t1]
+            if not doubtful:
+                break
+            ground = self._ground_bound(t, h)
+            if ground is None:
+                wake = doubtful
+            else:
+                self.stats["proofs"] += 1
+                horizons = self._gaps.horizons(y, h, ground, self._forces(pending), doubtful)
+                wake = [k for k, s in zip(doubtful, horizons) if s < h]
+                for k, s in zip(doubtful, horizons):
+                    if s >= h:
+                        self._proven[k] = t1        # proven for this step only (with these forces)
+            if not wake:
+                break
+            for k in wake:
+                node = system.contacts[k]
+                dormancy.wake(node)
+                node.step(y, t, h)
+                pending.remove(k)
+        for k in pending:
+            dormancy.skip(system.contacts[k], t, h)
+
+    def _forces(self, sleeping: list[int]) -> dict:
+        """Floor forces (N) of the contacts that stepped, per building, held over the step."""
         y = self.system.y
-        for node in self._order:
-            node.step(y, t, h)
+        forces: dict = {}
+        for k, lv in enumerate(self.levels):
+            if k in sleeping:
+                continue
+            F = y.item(lv.i_F)
+            if F == 0.0:
+                continue
+            left, fl, right, fr, _ = self._gaps.levels[k]
+            for b, f, sign in ((left, fl, -1.0), (right, fr, 1.0)):
+                vec = forces.get(b)
+                if vec is None:
+                    vec = forces[b] = np.zeros(self._gaps.buildings[b][0].n)
+                vec[f] += sign * F
+        return forces
+
+    def finish(self) -> None:
+        if self._dormancy is not None:
+            self._dormancy.wake_all()
+            self._dormancy.commit()
 
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
@@ -251,15 +486,26 @@ class Adaptive(CouplingStrategy):
     def _save(self):
         self.stats["saved_states"] += 1
         system = self.system
-        return ([n.instance.get_state() for n in system.nodes], system.y.copy(), system.ints.copy())
+        look = self._look
+        return ([n.instance.get_state() for n in system.nodes], system.y.copy(), system.ints.copy(),
+                self._dormancy.snapshot() if self._dormancy is not None else None, list(self._proven),
+                [n.knots_set for n in system.buildings],
+                (look.t_end, look.times, look.values, look.width, look.chunks) if look is not None else None)
 
     def _restore(self, saved) -> None:
-        states, y, ints = saved
+        states, y, ints, sleeping, proven, knots, look = saved
         system = self.system
         for node, state in zip(system.nodes, states):
             node.instance.set_state(state)
         system.y[:] = y
         system.ints[:] = ints
+        if sleeping is not None:
+            self._dormancy.restore(sleeping)
+        self._proven = list(proven)
+        for node, count in zip(system.buildings, knots):
+            node.knots_set = count
+        if look is not None:
+            self._look.t_end, self._look.times, self._look.values, self._look.width, self._look.chunks = look
 
     def _free(self, saved) -> None:
         for node, state in zip(self.system.nodes, saved[0]):

@@ -67,6 +67,21 @@ class CouplingStrategy:
         # steps shorter than 1e-9 h are round-off of t_bound / h, not a real step
         self._n_steps = max(1, math.ceil((self.t_bound - self.t0) / self.h - 1e-9))
 
+    #: called with the end time (s) of a step before the step is taken (the run loop uses it to
+    #: read the recorded outputs with that step's read: :class:`cosim.master.system.ReadPlan`)
+    on_step = None
+
+    def watched_columns(self) -> list[str]:
+        """The Real outputs this strategy reads after every step: the coupling's sources."""
+        return self.system.coupling_sources()
+
+    def finish(self) -> None:
+        """Bring every instance to the end time (a strategy that skips calls catches up here)."""
+
+    def _before(self, t_next: float) -> None:
+        if self.on_step is not None:
+            self.on_step(t_next)
+
     def step(self) -> None:
         """Advance one communication step."""
         if self.status != "running":
@@ -74,6 +89,7 @@ class CouplingStrategy:
         k = self.communication_steps
         t = self.t0 + k * self.h
         t_next = self.t_bound if k + 1 >= self._n_steps else self.t0 + (k + 1) * self.h
+        self._before(t_next)
         self._advance(t, t_next - t)
         self.communication_steps += 1
         self.t = t_next

@@ -1,0 +1,168 @@
+"""Dormant contacts: no call to a contact FMU over a step in which its gap cannot close.
+
+A contact FMU out of contact has nothing to do while its gap provably stays open
+(:mod:`cosim.master.gap_bound`).  The master then does not call it: the contact *sleeps*.  Its
+outputs stay those of its last step (``F = 0``: it was out of contact), and the master keeps
+what it would have been given, the floors' states at the start of each skipped step.
+
+When the gap may close again (or the run ends) the contact *wakes* and catches up, so that it
+is at the same time as the others and in the state it would have had:
+
+1. one step over the skipped interval up to the start of the last skipped step, from the
+   floors' states at its start: a skipped interval is a longer step out of contact;
+2. the last skipped step, from the floors' states at its start, as it would have been taken:
+   the contact FMU learns the structures' motion from its last step (``fmu_src/resolver.py``,
+   rule 1), so the step that follows is the one it would have taken without sleeping.
+
+The master proved the gap open over the whole interval, so the catch-up must leave the
+contact as it was (no impact, no dissipation, no force).  A contact FMU that nevertheless
+finds an impact there (its own prediction of the structures' motion over a long step
+disagrees with the proof) is restored to its state when it fell asleep (saved then with
+``fmi2GetFMUstate``) and given every skipped step as it would have had them
+(``stats["catch_up_replays"]``): results are then exactly those of a run without sleeping.
+
+Counters in ``stats``: ``dormant_steps`` (contact steps not called), ``catch_ups``,
+``catch_up_steps`` (the doSteps they made), ``catch_up_replays``.  Every step attempt calls a
+contact once or counts it dormant, so its doSteps are the attempts minus ``dormant_steps``
+plus ``catch_up_steps``.  The bookkeeping follows the adaptive coupling's rollback
+(:meth:`Dormancy.snapshot` / :meth:`Dormancy.restore`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .system import Node, System
+
+
+@dataclass
+class _Sleep:
+    """One contact's sleep: its FMU state when it fell asleep and the steps it skipped."""
+
+    state: Any                                       # fmi2FMUstate at the start of the first skipped step
+    skipped: list = field(default_factory=list)      # (t, h, inputs) of every skipped step
+    outputs: np.ndarray | None = None                # the contact's watched outputs then
+    impacts: int = 0
+
+
+class Dormancy:
+    """Which contact FMUs sleep and how they catch up (module docstring)."""
+
+    def __init__(self, system: "System", stats: dict, span: float):
+        if not (span > 0.0 and math.isfinite(span)):
+            raise ValueError(f"catch-up span = {span!r} s must be > 0")
+        self.span = float(span)
+        self.system = system
+        self.stats = stats
+        stats.setdefault("dormant_steps", 0)
+        stats.setdefault("catch_ups", 0)
+        stats.setdefault("catch_up_steps", 0)
+        stats.setdefault("catch_up_replays", 0)
+        self.sleeping: dict[str, _Sleep] = {}
+        self._retired: list[Any] = []               # states freed at the next commit
+        self._i_impacts: dict[str, int] = {}
+        #: outputs that stay as they are over a step out of contact: the force (0) and the energy
+        #: dissipated so far (the catch-up checks them, with the impacts counter)
+        self._quiet: dict[str, np.ndarray] = {}
+        index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
+        for node in system.contacts:
+            names = node.integers.names
+            self._i_impacts[node.name] = names.index("impacts") if "impacts" in names else -1
+            self._quiet[node.name] = np.array([index[f"{node.name}.{v}"] for v in ("F", "E_dissipated")
+                                               if f"{node.name}.{v}" in index], dtype=np.intp)
+
+    def asleep(self, node: "Node") -> bool:
+        return node.name in self.sleeping
+
+    def skip(self, node: "Node", t: float, h: float) -> None:
+        """``node`` does not step over ``[t, t + h]`` (it falls asleep now if awake)."""
+        sleep = self.sleeping.get(node.name)
+        if sleep is None:
+            sleep = self.sleeping[node.name] = _Sleep(
+                node.instance.get_state(), outputs=self.system.y[self._quiet[node.name]].copy(),
+                impacts=self._impacts(node))
+        inputs = np.empty(node.A.shape[0])
+        if inputs.size:
+            node._inputs(self.system.y, inputs)
+        sleep.skipped.append((t, h, inputs))
+        self.stats["dormant_steps"] += 1
+
+    def _impacts(self, node: "Node") -> int:
+        i = self._i_impacts[node.name]
+        return int(node.integers.values[i]) if i >= 0 else 0
+
+    def wake(self, node: "Node") -> None:
+        """Catch ``node`` up to the end of its last skipped step (module docstring)."""
+        sleep = self.sleeping.pop(node.name, None)
+        if sleep is None:
+            return
+        self.stats["catch_ups"] += 1
+        skipped = sleep.skipped
+        inst, inputs = node.instance, node.inputs
+        # pieces of consecutive skipped steps spanning at most `span` (a longer skipped step is a
+        # piece alone), each from the floors' states at its start; then the last skipped step alone
+        last = len(skipped) - 1
+        k = 0
+        while k < last:
+            t0, _, u0 = skipped[k]
+            end = k + 1
+            while end < last and skipped[end + 1][0] - t0 <= self.span * (1.0 + 1e-9):
+                end += 1
+            inputs.set(u0)
+            inst.do_step(t0, skipped[end][0] - t0)
+            self.stats["catch_up_steps"] += 1
+            k = end
+        t, h, u = skipped[-1]
+        inputs.set(u)
+        inst.do_step(t, h)
+        self.stats["catch_up_steps"] += 1
+        node.push()
+        node.integers.get()
+        now = self.system.y[self._quiet[node.name]]
+        if len(skipped) > 1 and (self._impacts(node) != sleep.impacts or not np.array_equal(now, sleep.outputs)):
+            # the contact found what the proof excludes: redo the interval as it would have been
+            self.stats["catch_up_replays"] += 1
+            inst.set_state(sleep.state)
+            for t, h, u in skipped:
+                inputs.set(u)
+                inst.do_step(t, h)
+                self.stats["catch_up_steps"] += 1
+            node.push()
+            node.integers.get()
+        self._retired.append((inst, sleep.state))
+
+    def wake_all(self) -> None:
+        for node in self.system.contacts:
+            if node.name in self.sleeping:
+                self.wake(node)
+
+    # -- rollback ----------------------------------------------------------------------------------
+    def snapshot(self) -> dict[str, _Sleep]:
+        """The bookkeeping now (taken with the FMU states before a step that may be redone)."""
+        return {name: _Sleep(s.state, list(s.skipped), s.outputs, s.impacts) for name, s in self.sleeping.items()}
+
+    def restore(self, snapshot: dict[str, _Sleep]) -> None:
+        """Back to ``snapshot``: states saved since then are freed, those it holds stay."""
+        kept = {id(s.state) for s in snapshot.values()}
+        for name, sleep in self.sleeping.items():
+            if id(sleep.state) not in kept:
+                self._free(self.system.node(name).instance, sleep.state)
+        self._retired = [(inst, st) for inst, st in self._retired if id(st) not in kept] 
+        for inst, st in self._retired:
+            self._free(inst, st)
+        self._retired = []
+        self.sleeping = {name: _Sleep(s.state, list(s.skipped), s.outputs, s.impacts) for name, s in snapshot.items()}
+
+    def commit(self) -> None:
+        """The step is accepted: free the states of the contacts that woke in it."""
+        for inst, state in self._retired:
+            self._free(inst, state)
+        self._retired = []
+
+    @staticmethod
+    def _free(instance, state) -> None:
+        instance.free_state(state)

@@ -1,0 +1,241 @@
+"""Proof that a gap stays open: how far the floors can move over a step, from the buildings' modes.
+
+The adaptive master takes a long step only where every gap provably stays open, and leaves a
+contact FMU dormant over a step only where its gap provably stays open
+(:mod:`cosim.master.coupling.adaptive`, :mod:`cosim.master.dormancy`).  The proof is a bound on
+the penetration ``delta(t + s) = u_L(t + s) - u_R(t + s) - gap`` of each contact level over
+``0 <= s <= H``, from the buildings' states at ``t`` and a bound on what drives them over the step.
+
+A linear shear building with classical damping (Rayleigh ``C = a0 M + a1 K`` or modal damping
+are both classical) decouples into modes ``q = Phi' M u`` (mass-normalised ``Phi``)::
+
+    q_j'' + 2 zeta_j w_j q_j' + w_j^2 q_j = p_j(t),   p_j = -Gamma_j ag(t) + phi_j' F,   Gamma_j = phi_j' M 1
+
+so a floor's displacement over the step is ``u_f(t + s) = sum_j Phi_fj (q_j_free(s) + q_j_forced(s))``:
+
+* ``q_j_free(s)``, the damped free motion from ``q_j(t), q_j'(t)``, is known exactly;
+* ``|q_j_forced(s)| <= P_j G_j(s)`` with ``P_j >= max |p_j|`` over the step and
+  ``G_j(s) = int_0^s min(r, 1 / w_j) dr``: the impulse response ``h_j`` starts at 0 with unit
+  slope (``|h_j(r)| <= r``) and never holds more than the energy of a unit impulse
+  (``(h_j'^2 + w_j^2 h_j^2) / 2 <= 1/2`` under any damping ``>= 0``, so ``|h_j| <= 1 / w_j``).
+
+Hence ``delta(t + s) <= delta_free(s) + B(s)`` with ``B`` the two buildings' forced bounds
+(increasing in ``s``).  The free part is checked on a grid of ``N`` intervals; between grid
+points it cannot exceed the mean of its end values by more than ``L dS / 2``, ``L`` a bound on
+its rate (the free modal energy never grows: ``|q_j_free'| <= sqrt(w_j^2 q_j^2 + q_j'^2)``).
+The ground acceleration's bound is the largest ``|ag|`` of the record's polyline up to each
+grid point (the ground FMU's knots, :mod:`cosim.master.knots`); a contact force held over the
+step enters as ``|phi_j' F|``.  Nonlinear (yielding) storeys have no such bound: the master
+then takes no long step and leaves no contact dormant.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from fmu_src.shear_building import ShearBuilding
+
+#: grid intervals over a horizon: with relative speeds of ~0.5 m/s and a 0.32 s horizon the
+#: free motion's slack between grid points is ~1 mm, a few % of a building gap
+GRID = 64
+
+
+class ModalBound:
+    """A linear building's modes, for bounding its floors' motion over a step (module docstring)."""
+
+    def __init__(self, building: ShearBuilding):
+        phi = np.asarray(building.mode_shapes, dtype=float)
+        w = np.asarray(building.omegas, dtype=float)
+        masses = np.asarray(building.masses, dtype=float)
+        modal_c = phi.T @ building.C @ phi
+        off = modal_c - np.diag(np.diag(modal_c))
+        if np.max(np.abs(off), initial=0.0) > 1e-9 * max(np.max(np.abs(modal_c)), 1e-300):
+            raise ValueError("damping is not classical: the modes do not decouple")
+        self.n = w.size
+        self.phi = phi
+        self.to_modal = phi.T * masses            # q = to_modal @ u
+        self.gamma = phi.T @ masses               # Gamma_j = phi_j' M 1
+        self.w = w
+        c = np.diag(modal_c)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.zeta = np.where(w > 0.0, c / (2.0 * np.where(w > 0.0, w, 1.0)), 0.0)
+        self._tables: dict[float, tuple[np.ndarray, ...]] = {}
+
+    # -- the free motion and the forced bound on a grid of s = H k / GRID ------------------------------
+    def tables(self, H: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(s, Ac, As, G)`` on ``s_k = H k / GRID``: ``q_free = Ac q0 + As (q0' + zeta w q0)``
+        (modes x points) and ``G_j(s_k)`` (modes x points); cached per ``H``."""
+        cached = self._tables.get(H)
+        if cached is not None:
+            return cached
+        s = H * np.arange(GRID + 1) / GRID
+        Ac = np.ones((self.n, s.size))
+        As = np.tile(s, (self.n, 1))
+        for j in range(self.n):
+            wj, zj = self.w[j], self.zeta[j]
+            if wj == 0.0:                          # a free mass: q = q0 + q0' s
+                continue
+            decay = np.exp(-zj * wj * s)
+            if zj < 1.0:
+                wd = wj * math.sqrt(1.0 - zj * zj)
+                Ac[j] = decay * np.cos(wd * s)
+                As[j] = decay * np.sin(wd * s) / wd
+            elif zj > 1.0:
+                ws = wj * math.sqrt(zj * zj - 1.0)
+                Ac[j] = decay * np.cosh(ws * s)
+                As[j] = decay * np.sinh(ws * s) / ws
+            else:
+                Ac[j] = decay
+                As[j] = decay * s
+        G = np.tile(0.5 * s * s, (self.n, 1))     # |h| <= r: a free mass (w = 0) has no other bound
+        for j in range(self.n):
+            if self.w[j] > 0.0:
+                knee = 1.0 / self.w[j]                 # beyond r = 1/w, |h| <= 1/w
+                G[j] = np.where(s <= knee, 0.5 * s * s, 0.5 * knee * knee + (s - knee) * knee)
+        if len(self._tables) > 64:                # a bounded number of distinct step lengths
+            self._tables.pop(next(iter(self._tables)))
+        out = self._tables[H] = (s, Ac, As, G)
+        return out
+
+    def free_motion(self, u: np.ndarray, v: np.ndarray, H: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(Q, speed)``: the modal free motion ``q_j(s_k)`` (modes x points) from the floor
+        displacements ``u`` and velocities ``v`` (m, m/s, relative to the ground) and the bound
+        ``sqrt(w_j^2 q_j^2 + q_j'^2)`` on each mode's free rate (m/s, modal units)."""
+        q = self.to_modal @ u
+        qd = self.to_modal @ v
+        _, Ac, As, _ = self.tables(H)
+        Q = Ac * q[:, None] + As * (qd + self.zeta * self.w * q)[:, None]
+        return Q, np.sqrt((self.w * q) ** 2 + qd * qd)
+
+
+class FloorMotion:
+    """One building's motion over a horizon ``H``, as the contact levels ask for it."""
+
+    def __init__(self, bound: ModalBound, u: np.ndarray, v: np.ndarray, H: float,
+                 ground_bound: np.ndarray, force: np.ndarray | None):
+        """``ground_bound[k]`` (m/s^2) bounds ``|ag|`` over ``[0, s_k]``; ``force`` (N, per floor)
+        is held over the horizon (None: no force)."""
+        self.bound = bound
+        self.Q, self.speed = bound.free_motion(u, v, H)
+        _, _, _, G = bound.tables(H)
+        self.G = G
+        self.ground = ground_bound
+        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and np.any(force) else None
+
+    def floor(self, f: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Floor ``f`` (0-based): free displacement on the grid (m), forced bound on the grid (m,
+        increasing) and the bound on the free rate (m/s)."""
+        row = self.bound.phi[f]
+        a = np.abs(row)
+        forced = (a * np.abs(self.bound.gamma)) @ self.G * self.ground
+        if self.modal_force is not None:
+            forced = forced + (a * self.modal_force) @ self.G
+        return row @ self.Q, forced, float(a @ self.speed)
+
+
+def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
+                 gap: float, H: float) -> float:
+    """Longest ``s <= H`` (s) over which ``delta = u_left - u_right - gap`` provably stays < 0,
+    from :meth:`FloorMotion.floor` of the two floors (0 if the gap is not open now)."""
+    xl, bl, ll = left
+    xr, br, lr = right
+    delta = xl - xr - gap
+    if delta[0] >= 0.0:
+        return 0.0
+    dS = H / GRID
+    # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
+    upper = 0.5 * (delta[:-1] + delta[1:]) + 0.5 * (ll + lr) * dS + bl[1:] + br[1:]
+    bad = np.flatnonzero(upper >= 0.0)
+    return H if bad.size == 0 else float(bad[0]) * dS
+
+
+def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
+    """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
+    must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
+    s = t0 + H * np.arange(GRID + 1) / GRID
+    out = np.maximum.accumulate(np.abs(np.interp(s, times, values)))
+    lo, hi = np.searchsorted(times, (t0, t0 + H), side="left")
+    hi = np.searchsorted(times, t0 + H, side="right")
+    if hi > lo:
+        # a knot's value counts from the first grid point at or after it: the largest |value|
+        # of the knots up to each grid point (a prefix maximum, sampled where each grid point falls)
+        knots = times[lo:hi]
+        prefix = np.maximum.accumulate(np.abs(values[lo:hi]))
+        k = np.searchsorted(knots, s, side="right")          # knots at or before each grid point
+        reached = k > 0
+        out[reached] = np.maximum(out[reached], prefix[k[reached] - 1])
+    return out
+
+
+def constant_bound(value: float) -> np.ndarray:
+    """A ground bound of ``value`` over the whole grid (e.g. 0 without ground motion)."""
+    return np.full(GRID + 1, float(value))
+
+
+def floor_forces(n: int, contributions: Sequence[tuple[int, float]]) -> np.ndarray | None:
+    """The force vector (N) of ``n`` floors from ``(floor index, force)`` pairs, None if all zero."""
+    if not contributions:
+        return None
+    f = np.zeros(n)
+    for i, value in contributions:
+        f[i] += value
+    return f if np.any(f) else None
+
+
+class OpenGaps:
+    """Every contact level of a system with what proves its gap open (module docstring):
+    each building's :class:`ModalBound` and where its floors' states live in ``System.y``.
+
+    :meth:`build` returns None when a building has no such bound (yielding storeys,
+    non-classical damping): the master then neither takes long steps nor lets contacts sleep.
+    """
+
+    def __init__(self, buildings: dict, levels: list):
+        self.buildings = buildings          # name -> (ModalBound, x index array, v index array)
+        self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
+
+    @classmethod
+    def build(cls, system, contact_levels) -> "OpenGaps | None":
+        from .models import shear_building, storeys_are_linear
+        from .names import column, element_name
+
+        index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
+        buildings = {}
+        for node in system.buildings:
+            if not storeys_are_linear(node.spec):
+                return None
+            try:
+                bound = ModalBound(shear_building(node.spec))
+            except ValueError:
+                return None
+            n = bound.n
+            buildings[node.name] = (bound, np.array([index[column(node.name, element_name("x", i))] for i in range(1, n + 1)]),
+                                    np.array([index[column(node.name, element_name("v", i))] for i in range(1, n + 1)]))
+        where = {lv.instance: lv for lv in system.scene.levels}
+        levels = []
+        for lv in contact_levels:
+            level = where[lv.name]
+            levels.append((level.left, level.floor_left - 1, level.right, level.floor_right - 1, lv.gap))
+        return cls(buildings, levels)
+
+    def columns(self, system) -> list[str]:
+        """The Real outputs the proof reads: every floor's displacement and velocity."""
+        return [system.columns[i] for _, x, v in self.buildings.values() for i in np.concatenate((x, v))]
+
+    def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
+                 which: Sequence[int] | None = None) -> list[float]:
+        """For each contact level (or those in ``which``): how long (s, <= ``H``) its gap provably
+        stays open from now, with ``ground[k]`` bounding ``|ag|`` up to grid point ``k`` and
+        ``forces`` (building -> force per floor, N) held over the horizon."""
+        motions = {}
+        out = []
+        for k in (range(len(self.levels)) if which is None else which):
+            left, fl, right, fr, gap = self.levels[k]
+            for b in (left, right):
+                if b not in motions:
+                    bound, ix, iv = self.buildings[b]
+                    motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, (forces or {}).get(b))
+            out.append(open_horizon(motions[left].floor(fl), motions[right].floor(fr), gap, H))
+        return out

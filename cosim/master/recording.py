@@ -1,0 +1,225 @@
+"""What a run reads and keeps: rows at the output interval, peaks and impacts from every step.
+
+A run reads after every step only what its coupling, its stability guard and its summary need
+(the *watched* outputs, one ``fmi2GetReal`` per instance: :meth:`cosim.master.system.System.watch`)
+and keeps:
+
+* **rows** (``history.csv``, the plots): the *recorded* outputs at the communication points,
+  at most one row per ``output_interval`` (the first point at or after each multiple of it, and
+  the last); ``output_interval = 0`` keeps every point.  The recorded set is by default what
+  the summary and the plots use (:func:`recorded_columns`), ``"all"`` every output, or a list
+  of columns.  Where the adaptive coupling takes long steps (every gap provably open), rows are
+  as far apart as its steps.
+* **peaks from every step**: the largest ``|x[i]|`` of every floor and ``|base_shear|`` of
+  every building and the largest mean force ``F`` and penetration ``delta`` of every contact,
+  with the time of the step end where each was reached, whatever the output interval;
+* **impact onsets**: every step in which a contact's ``impacts`` grew, as (start, end) times
+  (the counter is read after a step in which the contact had a force or a closed gap);
+* **the final value** of every output (read once at the end), including the buildings' in-step
+  peaks (``x_peak``, ``drift_peak``).
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Iterable, Sequence
+
+import numpy as np
+
+from .names import column, element_name
+from .scene import SceneError
+
+if TYPE_CHECKING:
+    from .system import System
+
+#: the recorded sets a run may ask for by name
+RECORD_SETS = ("summary", "all")
+#: most history values (rows x columns) a run may keep: 2e8 doubles = 1.6 GB
+MAX_HISTORY_VALUES = 200_000_000
+
+
+def building_columns(system: "System", name: str, variables: Iterable[str]) -> list[str]:
+    """Columns ``name.var`` (scalars) and ``name.var[i]`` (every floor) that the system has."""
+    have = set(system.columns)
+    n = system.scene.n_storeys(name)
+    out = []
+    for var in variables:
+        if column(name, var) in have:
+            out.append(column(name, var))
+        else:
+            out += [c for c in (column(name, element_name(var, i)) for i in range(1, n + 1)) if c in have]
+    return out
+
+
+def recorded_columns(system: "System", record: str | Sequence[str] = "summary") -> list[str]:
+    """The columns a run records: ``"summary"`` (what summary.json, the terminal summary and the
+    plots use: floor displacements, energies, contact force, running peak force, penetration,
+    dissipated energy and impacts), ``"all"``, or the given column names (each must exist)."""
+    if isinstance(record, str):
+        if record == "all":
+            return list(system.columns)
+        if record != "summary":
+            raise SceneError(f"record = {record!r} is not allowed: one of {', '.join(RECORD_SETS)} or a list of "
+                             f"columns")
+        out = []
+        for b in system.buildings:
+            out += building_columns(system, b.name, ("x", "E_kinetic", "E_strain", "E_damping", "E_hysteretic",
+                                                     "E_input", "E_external"))
+        have = set(system.columns)
+        for c in system.contacts:
+            out += [x for x in (column(c.name, v) for v in ("F", "F_max", "delta", "E_dissipated", "impacts"))
+                    if x in have]
+        return out
+    unknown = [c for c in record if c not in system.columns]
+    if unknown:
+        raise SceneError(f"record: no column {unknown[0]!r}; columns are instance.variable, e.g. "
+                         f"{system.columns[0]!r}")
+    return list(dict.fromkeys(record))
+
+
+def tracked_columns(system: "System") -> list[str]:
+    """What every step must read for the peaks and impact onsets (:class:`Recorder`)."""
+    out = []
+    for b in system.buildings:
+        out += building_columns(system, b.name, ("x", "base_shear"))
+    have = set(system.columns)
+    for c in system.contacts:
+        out += [x for x in (column(c.name, "F"), column(c.name, "delta")) if x in have]
+    return out
+
+
+class Recorder:
+    """Rows at the output interval, peaks and impact onsets from every step (module docstring)."""
+
+    def __init__(self, system: "System", stop_time: float, interval: float, columns: Sequence[str]):
+        if not (interval >= 0.0 and math.isfinite(interval)):
+            raise SceneError(f"output_interval = {interval!r} s must be a number >= 0 (0: every communication point)")
+        self.system = system
+        self.stop_time = float(stop_time)
+        self.interval = float(interval)
+        n_y = system.y.size
+        index = {c: i for i, c in enumerate(system.columns)}
+        self.columns = list(columns)
+        self._real = np.array([index[c] for c in self.columns if index[c] < n_y], dtype=np.intp)
+        self._int = np.array([index[c] - n_y for c in self.columns if index[c] >= n_y], dtype=np.intp)
+        recorded_ints = {c for c in self.columns if index[c] >= n_y}
+        self._int_ports = []
+        for node in system.nodes:
+            for port in (node.integers, node.booleans):
+                names = {column(node.name, v) for v in port.names}
+                kept = {column(node.name, "impacts")} if node.kind == "contact" else set()
+                if names & recorded_ints - kept:
+                    self._int_ports.append(port)
+        self.columns = [system.columns[i] for i in self._real] + [system.columns[n_y + i] for i in self._int]
+        width = max(len(self.columns), 1)
+        rows = (int(self.stop_time / self.interval) + 2) if self.interval > 0.0 else 1024
+        if self.interval > 0.0 and rows * width > MAX_HISTORY_VALUES:
+            raise SceneError(
+                f"output_interval = {self.interval:g} s over {self.stop_time:g} s keeps {rows} rows of {width} "
+                f"columns, more than {MAX_HISTORY_VALUES:.0e} values: use a longer output interval or "
+                f"record fewer columns")
+        self.time = np.empty(min(rows, 1 << 16))
+        self.values = np.empty((self.time.size, width))
+        self.count = 0
+        self.next_row = 0.0
+        self._eps = 1e-9 * max(self.interval, 1e-12)
+        # peaks of every step
+        tracked = tracked_columns(system)
+        signed = [c for c in tracked if c.rsplit(".", 1)[1] in ("F", "delta")]
+        absolute = [c for c in tracked if c not in signed]
+        self._abs_cols, self._signed_cols = absolute, signed
+        self._abs = np.array([index[c] for c in absolute], dtype=np.intp)
+        self._sgn = np.array([index[c] for c in signed], dtype=np.intp)
+        self.abs_max = np.zeros(self._abs.size)
+        self.abs_time = np.zeros(self._abs.size)
+        self.sgn_max = np.full(self._sgn.size, -np.inf)
+        self.sgn_time = np.zeros(self._sgn.size)
+        # impact onsets of every step
+        self._contacts = []
+        for node in system.contacts:
+            names = node.integers.names
+            if "impacts" in names:
+                self._contacts.append((node, names.index("impacts"), index[column(node.name, "F")],
+                                       index[column(node.name, "delta")]))
+        self.impacts = {node.name: 0 for node, *_ in self._contacts}
+        self._active = {node.name: False for node, *_ in self._contacts}
+        self.onsets: dict[str, list[tuple[float, float]]] = {node.name: [] for node, *_ in self._contacts}
+
+    def start(self, t0: float) -> None:
+        """The state at ``t0`` (after initialisation, every output read): the first row, the
+        peaks' starting values, the impact counters."""
+        y = self.system.y
+        self.abs_max = np.abs(y[self._abs])
+        self.abs_time[:] = t0
+        self.sgn_max = y[self._sgn].copy()
+        self.sgn_time[:] = t0
+        for node, i_impacts, i_F, i_delta in self._contacts:
+            self.impacts[node.name] = int(node.integers.values[i_impacts])
+            self._active[node.name] = y.item(i_F) != 0.0 or y.item(i_delta) >= 0.0
+        self.record(t0)
+
+    # -- rows ------------------------------------------------------------------------------------
+    def due(self, t_next: float) -> bool:
+        """True if a step ending at ``t_next`` (s) is recorded."""
+        return t_next >= self.next_row - self._eps or t_next >= self.stop_time - 1e-9 * self.stop_time
+
+    def record(self, t: float) -> None:
+        """Keep the recorded columns now (their values were read with the step)."""
+        if self.count == self.time.size:
+            self.time = np.resize(self.time, 2 * self.time.size)
+            self.values = np.resize(self.values, (2 * self.values.shape[0], self.values.shape[1]))
+            if self.time.size * self.values.shape[1] > MAX_HISTORY_VALUES:
+                raise SceneError(f"the history passed {MAX_HISTORY_VALUES:.0e} values at t = {t:g} s: use a "
+                                 f"longer output_interval or record fewer columns")
+        k = self.count
+        self.time[k] = t
+        row = self.values[k]
+        nr = self._real.size
+        row[:nr] = self.system.y[self._real]
+        if self._int.size:
+            row[nr:nr + self._int.size] = self.system.ints[self._int]
+        self.count += 1
+        if self.interval > 0.0:
+            self.next_row = (math.floor(t / self.interval + 1e-9) + 1) * self.interval
+
+    def read_ints(self) -> None:
+        """Read the recorded Integer and Boolean outputs (a contact's ``impacts`` is read by
+        :meth:`track` after every step that can change it, so it is current already)."""
+        for port in self._int_ports:
+            port.get()
+
+    # -- every step ------------------------------------------------------------------------------------
+    def track(self, t_start: float, t_end: float) -> None:
+        """Peaks and impact onsets of the step ``[t_start, t_end]`` that was just accepted."""
+        y = self.system.y
+        if self._abs.size:
+            v = np.abs(y[self._abs])
+            up = v > self.abs_max
+            if up.any():
+                self.abs_max[up] = v[up]
+                self.abs_time[up] = t_end
+        if self._sgn.size:
+            v = y[self._sgn]
+            up = v > self.sgn_max
+            if up.any():
+                self.sgn_max[up] = v[up]
+                self.sgn_time[up] = t_end
+        item = y.item
+        for node, i_impacts, i_F, i_delta in self._contacts:
+            active = item(i_F) != 0.0 or item(i_delta) >= 0.0
+            if active or self._active[node.name]:
+                count = int(node.integers.get()[i_impacts])
+                if count > self.impacts[node.name]:
+                    self.onsets[node.name].append((t_start, t_end))
+                    self.impacts[node.name] = count
+            self._active[node.name] = active
+
+    def peaks(self) -> dict[str, tuple[float, float]]:
+        """``column -> (peak, time of the step end where it was reached)``: absolute values for
+        floors and base shears, signed maxima for contact forces and penetrations."""
+        out = {c: (float(m), float(t)) for c, m, t in zip(self._abs_cols, self.abs_max, self.abs_time)}
+        out.update({c: (float(m), float(t)) for c, m, t in zip(self._signed_cols, self.sgn_max, self.sgn_time)})
+        return out
+
+    def history(self) -> tuple[np.ndarray, np.ndarray]:
+        k = self.count
+        return self.time[:k].copy(), self.values[:k].copy()

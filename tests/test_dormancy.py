@@ -1,0 +1,166 @@
+"""Dormant contacts (cosim/master/dormancy.py): no call to a contact FMU over a step in which its
+gap provably stays open; it wakes in time and ends as it would have without sleeping."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.fmus import POUNDING, fmu_spec
+from cosim.master.loader import bundled_scenes, load_scene
+from cosim.master.results import summarize
+from cosim.master.simulate import simulate
+from cosim.master.system import System
+from fmu_src.contact_laws import law_for
+from fmu_src.resolver import ImpactResolver
+from scenario_checks import simulate_scene
+from test_coupling_without_fmus import FakeFmu, building
+
+
+# -- every bundled scene -------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", bundled_scenes())
+def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
+    """Identical impacts and onsets, peak forces and dissipated energy within 0.1 % (measured:
+    equal to 1e-6 or better; the catch-up's longer steps out of contact change only how the
+    contact learns the buildings' motion before it wakes)."""
+    if load_scene(name, [], catalog).coupling != "adaptive":
+        # a fixed-step coupling calls every instance at every step: nothing sleeps
+        fixed = simulate_scene(catalog, name)
+        assert set(fixed.cost.do_steps.values()) == {fixed.cost.communication_steps}
+        return
+    awake = simulate_scene(catalog, name, dormancy=False)
+    asleep = simulate_scene(catalog, name, dormancy=True)
+    a, b = summarize(awake), summarize(asleep)
+    assert b.impacts == a.impacts
+    for c in a.contacts:
+        assert asleep.onsets[c] == awake.onsets[c]
+        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-3)
+        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-3)
+    if asleep.scene.contacts and asleep.scene.coupling == "adaptive":
+        stats = asleep.stats
+        assert stats["dormant_steps"] > 0 and stats["catch_ups"] > 0
+        # each contact's doSteps: the attempts it did not sleep through, plus its catch-up steps
+        attempts = asleep.cost.communication_steps + asleep.cost.rollbacks
+        called = sum(asleep.cost.do_steps[c.name] for c in asleep.scene.contacts)
+        assert called == len(asleep.scene.contacts) * attempts - stats["dormant_steps"] + stats["catch_up_steps"]
+        assert called < 0.5 * len(asleep.scene.contacts) * attempts
+
+
+# -- the protocol, on fake instances ----------------------------------------------------------------------
+GAP, V = 0.1005, 0.5        # m, m/s: two free masses closing at 1 m/s meet at t = 0.1005 s
+H, STOP = 2e-3, 0.14
+
+
+def contact_log(inst, t, h):
+    """A plain spring on the inputs at the step start, logging every doStep it gets."""
+    v = inst.values
+    if t is None:
+        return
+    delta = v["x1"] - v["x2"] - v["gap"]
+    inst.log.append((t, h, delta))
+    v["delta"] = delta
+    v["F"] = v["F_max"] = 1e4 * max(delta, 0.0)
+
+
+def fake_scene(catalog):
+    raw = dict(name="fake", stop_time=STOP, step=H, coupling="adaptive",
+               buildings=dict(left=dict(m=[2.0], k=[0.0], zeta=0.0, v0=[V]),
+                              right=dict(m=[3.0], k=[0.0], zeta=0.0, v0=[-V])),
+               pounding=dict(gap=GAP, k=1e4, n=1.0, model="hertz", resolve_impacts=False))
+    return load_scene(raw, catalog=catalog)
+
+
+@pytest.fixture
+def fakes():
+    return {"pounding": FakeFmu("pounding", contact_log), "building": FakeFmu("building", building),
+            "ground_motion": FakeFmu("ground_motion", lambda *a: None)}
+
+
+def run_fake(catalog, **options):
+    with System(fake_scene(catalog), catalog) as system:
+        result = simulate(system, progress=False, check_stability=False, record="all", output_interval=0.0,
+                          long_steps=False, **options)
+    return result, catalog["pounding"].instances[-1].log
+
+
+def test_contact_wakes_before_its_gap_closes(fakes):
+    """The contact sleeps while the free masses approach, wakes inside what a sleep to the end
+    would have skipped, and gets one doStep after another with no gap and no overlap in time
+    (a contact FMU refuses a step that does not start where its last ended)."""
+    result, log = run_fake(fakes)
+    stats = result.stats
+    assert stats["dormant_steps"] > 10 and stats["catch_ups"] >= 1 and stats["catch_up_replays"] == 0
+    starts = np.array([t for t, _, _ in log])
+    ends = np.array([t + h for t, h, _ in log])
+    np.testing.assert_allclose(starts[1:], ends[:-1], rtol=0, atol=1e-15)
+    assert starts[0] == 0.0 and ends[-1] == pytest.approx(STOP)
+    # it is awake in the step where the gap closes: a step of its own (no longer than the
+    # master's), starting open, and the next one starts closed
+    closing = GAP / (2 * V)
+    k = int(np.searchsorted(starts, closing - 1e-9, side="right")) - 1   # the adaptive lands on it
+    assert log[k][1] <= H * (1 + 1e-9) and log[k][2] < 0.0 <= log[k + 1][2]
+    # and the masses move exactly as when it never sleeps
+    awake, _ = run_fake({"pounding": FakeFmu("pounding", contact_log), "building": FakeFmu("building", building),
+                         "ground_motion": FakeFmu("ground_motion", lambda *a: None)}, dormancy=False)
+    np.testing.assert_array_equal(result["left.x[1]"], awake["left.x[1]"])
+    np.testing.assert_array_equal(result["right.v[1]"], awake["right.v[1]"])
+
+
+def test_a_catch_up_that_finds_an_impact_is_redone_step_by_step(fakes):
+    """A contact whose own prediction over a long step finds an impact the proof excludes (here
+    a fake that counts one in every step longer than 3 base steps): the master restores it to
+    its state when it fell asleep and gives it every skipped step as it would have had them."""
+    def suspicious(inst, t, h):
+        contact_log(inst, t, h)
+        if t is not None and h > 3 * H:
+            inst.values["impacts"] += 1
+            inst.values["E_dissipated"] += 1.0
+
+    fakes["pounding"].physics = suspicious
+    result, log = run_fake(fakes)
+    assert result.stats["catch_up_replays"] >= 1
+    # restored and redone in the master's own steps: nothing found, as without sleeping, and
+    # the restored contact's steps still follow one another
+    assert result.final["pounding_1.impacts"] == 0 and result.final["pounding_1.E_dissipated"] == 0.0
+    starts = np.array([t for t, _, _ in log])
+    ends = np.array([t + h for t, h, _ in log])
+    np.testing.assert_allclose(starts[1:], ends[:-1], rtol=0, atol=1e-15)
+
+
+# -- the real scene in which the first impact comes out of a sleep ------------------------------------------
+def test_free_vibration_wakes_for_its_first_impact(catalog):
+    """free_vibration: the floors are released 9 cm apart across a 2 cm gap and meet at 0.19 s;
+    the contact sleeps from the start and wakes for that first impact, which it resolves as it
+    does without sleeping."""
+    asleep = simulate_scene(catalog, "free_vibration", dormancy=True)
+    awake = simulate_scene(catalog, "free_vibration", dormancy=False)
+    assert asleep.stats["dormant_steps"] > 0
+    first_sleep_ends = asleep.onsets["pounding_1"][0][0]
+    assert first_sleep_ends == awake.onsets["pounding_1"][0][0]
+    assert asleep.final["pounding_1.F_max"] == pytest.approx(awake.final["pounding_1.F_max"], rel=1e-9)
+
+
+# -- why resolved contacts take no long step yet --------------------------------------------------------------
+def spurious_onsets(long_step: float) -> int:
+    """Impacts a resolved contact starts in one step of ``long_step`` s after 10 ms steps of a
+    relative motion ``delta = -25 mm + 10 mm sin(12 t)`` whose gap never closes."""
+    law = law_for("jankowski", 2.75e9, 1.5, 3e5, 3e5, 0.65, -1.0)
+    count = 0
+    for t_sleep in np.arange(0.5, 1.2, 0.1):
+        r = ImpactResolver(law)
+        t = 0.0
+        while t < t_sleep - 1e-9:
+            r.step(-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t), 0.01)
+            t += 0.01
+        count += r.step(-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t), long_step).impacts_started
+    return count
+
+
+def test_declared_long_quiet_steps_match_the_resolver():
+    """cosim/fmus.py declares whether pounding.fmu takes long steps out of contact; the declaration
+    must say what the resolver does: over a 0.32 s step out of contact the current resolver
+    extrapolates the structures' motion of its last 10 ms step and starts impacts the bodies
+    never have (2 of 7 here), while steps of 4 base steps (the dormant contact's catch-up) start none."""
+    assert spurious_onsets(0.04) == 0
+    assert fmu_spec(POUNDING).long_quiet_steps == (spurious_onsets(0.32) == 0)
