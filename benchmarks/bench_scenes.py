@@ -88,12 +88,13 @@ def table(rows: list[dict]) -> str:
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         os_dt = r.get("opensees_dt")
+        ratio = r.get("ratio", math.nan)
+        os_wall = "-" if os_dt is None else f"{r['opensees_wall_s']:.3f} s"
         lines.append(
             f"| {r['scene']} | {r['wall_s']:.3f} s | {r['steps']} | {r['us_per_step']:.1f} | {r['calls_per_step']:.2f} | "
             f"{r['floor_s']:.3f} s | {pct(r['err_force'])} | {pct(r['err_energy'])} | {pct(r['err_displacement'])} | "
-            f"{'yes' if r['meets'] else 'no'} | {'-' if os_dt is None else f'{os_dt * 1e3:g} ms'} | "
-            f"{'-' if os_dt is None else f'{r['opensees_wall_s']:.3f} s'} | "
-            f"{'-' if not math.isfinite(r.get('ratio', math.nan)) else f'{r['ratio']:.2f}'} |")
+            f"{'yes' if r['meets'] else 'no'} | {'-' if os_dt is None else f'{os_dt * 1e3:g} ms'} | {os_wall} | "
+            f"{'-' if not math.isfinite(ratio) else f'{ratio:.2f}'} |")
     return "\n".join(lines)
 
 
