@@ -24,8 +24,8 @@ def rows(study, method):
 
 def test_every_strategy_is_measured(study):
     assert study.reference["impacts"] == 3
-    assert {r.method for r in study.rows} == {"jacobi", "gauss-seidel", "gauss-seidel-resolved", "adaptive",
-                                              "adaptive-resolved"}
+    assert {r.method for r in study.rows} == {"default settings", "jacobi", "gauss-seidel", "gauss-seidel-resolved",
+                                              "adaptive", "adaptive-resolved"}
     for r in study.rows:
         assert r.status == "ok"
         assert r.wall_time_s > 0 and r.communication_steps > 0 and r.fmu_calls > r.communication_steps
@@ -80,11 +80,32 @@ def test_score_applies_the_criteria():
 
 def test_written_files(study, tmp_path):
     folder = write_study(study, tmp_path / "acc")
-    assert {p.name for p in folder.iterdir()} == {"accuracy.csv", "accuracy.md", "accuracy.png"}
+    assert {p.name for p in folder.iterdir()} == {"accuracy.csv", "accuracy.md", "accuracy.png", "front.png"}
     with open(folder / "accuracy.csv") as fh:
         table = list(csv.DictReader(fh))
     assert len(table) == len(study.rows)
     assert float(table[0]["wall_time_s"]) == pytest.approx(study.rows[0].wall_time_s, rel=1e-5)
     text = markdown(study)
     assert "| adaptive | contact_fraction = 1/64 |" in text
+    assert "| default settings | the scene's |" in text
+    # the front: the wall time to reach each error level (no OpenSees in this reduced study)
+    assert "| largest error within | package: fastest run |" in text and "| 2 % | " in text
     assert (folder / "accuracy.png").stat().st_size > 10_000
+    assert (folder / "front.png").stat().st_size > 10_000
+
+
+def test_front_is_the_lower_envelope():
+    """front(): the runs no other run beats in both wall time and error, ordered by wall time;
+    time_to_reach(): the fastest run with all three errors within a level."""
+    from cosim.apps.accuracy import front, time_to_reach
+
+    def row(wall, err, impacts=3):
+        r = Row("m", "step", 0.0, wall_time_s=wall, impacts=impacts, err_peak_force=err, err_dissipated_energy=err,
+                err_peak_displacement=err)
+        r.error = err
+        return r
+
+    rows = [row(1.0, 0.05), row(2.0, 0.01), row(1.5, 0.02), row(3.0, 0.03), row(0.5, 0.001, impacts=2)]
+    assert front(rows, "err_peak_force", 3) == [(1.0, 0.05), (1.5, 0.02), (2.0, 0.01)]
+    assert time_to_reach(rows, 0.02, 3).wall_time_s == 1.5
+    assert time_to_reach(rows, 0.005, 3) is None            # the wrong-impacts run does not count
