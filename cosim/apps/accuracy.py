@@ -52,7 +52,7 @@ from ..master.runner import settings
 from ..master.scene import Override
 from ..master.simulate import simulate
 from ..master.system import Catalog, System
-from ..peers.opensees import opensees_available, opensees_for_scene
+from ..peers.opensees import material_for, opensees_available, opensees_for_scene
 from ..peers.reference import reference_for_scene
 
 #: acceptance limits of the brief (relative errors; impacts must agree exactly)
@@ -102,6 +102,7 @@ class Row:
     value: float
     status: str = "ok"                         # "ok", or why the run stopped
     wall_time_s: float = math.nan
+    cpu_time_s: float = math.nan
     communication_steps: int = 0
     rollbacks: int = 0
     fmu_calls: int = 0
@@ -200,6 +201,7 @@ def run_cosim(scene_name, family: Family, value: float, catalog, ref: dict[str, 
     summary = summarize(best)
     cost = summary.cost
     row.wall_time_s = cost.wall_time_s
+    row.cpu_time_s = cost.cpu_time_s
     row.communication_steps = cost.communication_steps
     row.rollbacks = cost.rollbacks
     row.fmu_calls = cost.fmu_calls
@@ -219,6 +221,7 @@ def run_peer(scene, dt: float, ref: dict[str, Any]) -> Row:
         row.status = f"failed: {str(exc).splitlines()[0]}"
         return row
     row.wall_time_s = peer.wall_time_s
+    row.cpu_time_s = peer.cpu_time_s
     row.communication_steps = int(round(scene.stop_time / dt))
     if not peer.converged:
         row.status = f"failed: {peer.message}"
@@ -245,6 +248,14 @@ def cheapest_passing_dt(scene, ref: dict[str, Any], start: float = OPENSEES_STAR
     ``start`` (never assumed): ``(passing row or None, every row tried)``.  The search stops at
     the first passing ``dt``; ``dt`` never exceeds the stop time."""
     rows: list[Row] = []
+    try:
+        for level in scene.contacts:
+            material_for(level.value("model"))
+    except ValueError as exc:            # no OpenSees material for this law: no time step will do
+        row = Row("opensees", "dt", float(start), status=f"failed: {exc}")
+        if log is not None:
+            log("  " + _row_line(row))
+        return None, [row]
     dt = min(float(start), float(scene.stop_time))
     for _ in range(max_halvings + 1):
         row = run_peer(scene, dt, ref)
@@ -301,8 +312,11 @@ def machine_note() -> str:
     import os
     import platform
 
+    load = ""
+    if hasattr(os, "getloadavg"):
+        load = f"load average {os.getloadavg()[0]:.1f} at the start; "
     return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
-            f"{platform.python_version()}; wall times are single runs on a machine shared with other "
+            f"{platform.python_version()}; {load}wall times are single runs on a machine shared with other "
             f"processes (expect +-30 %)")
 
 

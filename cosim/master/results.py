@@ -47,6 +47,9 @@ class Cost:
     rollbacks: int
     fmu_calls: int
     do_steps: Mapping[str, int] = field(default_factory=dict)
+    #: CPU time of the simulation loop (s, this process): what a benchmark on a shared machine
+    #: compares (not a key of summary.json)
+    cpu_time_s: float = float("nan")
 
     @property
     def do_step_calls(self) -> int:

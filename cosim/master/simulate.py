@@ -55,6 +55,7 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     calls_before = system.fmu_calls()
     steps_before = system.do_steps()
     wall = time.perf_counter()
+    cpu = time.process_time()
     system.initialize(0.0, stop_time)
     solver = cls(system, 0.0, stop_time, step, **options)
     guard = None
@@ -104,12 +105,13 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall
+    cpu = time.process_time() - cpu
     stats = dict(getattr(solver, "stats", {}))
     if guard is not None and guard.step_over_time_scale:
         stats["step_over_time_scale"] = dict(guard.step_over_time_scale)
     cost = Cost(wall_time_s=wall, communication_steps=solver.communication_steps, rollbacks=solver.rollbacks,
                 fmu_calls=system.fmu_calls() - calls_before,
-                do_steps={n: v - steps_before.get(n, 0) for n, v in system.do_steps().items()})
+                do_steps={n: v - steps_before.get(n, 0) for n, v in system.do_steps().items()}, cpu_time_s=cpu)
     times, values = recorder.history()
     final = dict(zip(system.columns, np.concatenate((system.y, system.ints)).tolist()))
     return SimulationResult(

@@ -130,8 +130,8 @@ class PeerResult:
     opening steps spent on the open side of the gap and over-states the dissipation (default
     scene at dt = 5 ms: +6.9 % clipped, -0.2 % consistent, against the reference).
 
-    ``wall_time_s`` times the analysis loop in the child process; ``build_time_s`` the model
-    definition.  ``algorithms`` counts the steps each fallback algorithm settled;
+    ``wall_time_s`` (``cpu_time_s``: its CPU time) times the analysis loop in the child
+    process; ``build_time_s`` the model definition.  ``algorithms`` counts the steps each fallback algorithm settled;
     ``subdivided_steps`` the steps that had to be halved (the balance then holds per
     sub-step, not over the recorded step).
     """
@@ -154,6 +154,7 @@ class PeerResult:
     subdivided_steps: int = 0
     message: str = ""
     v: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    cpu_time_s: float = float("nan")
 
     def displacements(self, building: int) -> np.ndarray:
         return self.u[:, self.floor_offsets[building]:self.floor_offsets[building + 1]]
@@ -290,7 +291,8 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
         floor_offsets=offsets, wall_time_s=float(summary["wall_time_s"]),
         build_time_s=float(summary["build_time_s"]), algorithms=summary["algorithms"],
         subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"],
-        v=arrays.get("v", np.zeros((0, u.shape[1] if u.ndim == 2 else 0))))
+        v=arrays.get("v", np.zeros((0, u.shape[1] if u.ndim == 2 else 0))),
+        cpu_time_s=float(summary.get("cpu_time_s", float("nan"))))
 
 
 def opensees_for_scene(scene, dt: float, material: str | None = None, overrides: dict | None = None,

@@ -153,6 +153,7 @@ def _worker(spec: dict) -> tuple[dict, dict]:
     stats = {"algorithms": {}, "subdivided_steps": 0}
     converged, message, k = True, "", 0
     t_start = time.perf_counter()
+    cpu_start = time.process_time()
     for k in range(1, n_steps + 1):
         if not _advance(ops, dt, 0, spec, stats):
             converged = False
@@ -166,10 +167,12 @@ def _worker(spec: dict) -> tuple[dict, dict]:
         for c, etag in enumerate(contact_tags):
             force[k, c] = max(0.0, -ops.eleResponse(etag, "basicForce")[0])
     wall = time.perf_counter() - t_start
+    cpu = time.process_time() - cpu_start
     ops.wipe()
     t, u, v, force = t[:k + 1], u[:k + 1], v[:k + 1], force[:k + 1]
     delta = np.column_stack([u[:, i] - u[:, j] - gap for i, j, gap in dofs]) if dofs else np.zeros((t.size, 0))
-    summary = dict(converged=converged, message=message, wall_time_s=wall, build_time_s=build_time, **stats)
+    summary = dict(converged=converged, message=message, wall_time_s=wall, cpu_time_s=cpu, build_time_s=build_time,
+                   **stats)
     return dict(t=t, u=u, v=v, force=force, delta=delta), summary
 
 

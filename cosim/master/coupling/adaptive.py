@@ -261,7 +261,10 @@ class Adaptive(CouplingStrategy):
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
         closures = []
-        for lv in self.levels:
+        proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
+        for lv, until in zip(self.levels, self._proven):
+            if until >= proven:
+                continue
             d, dd, ddd = lv.kinematics(y)
             if d > 0.0 or y.item(lv.i_F) > 0.0 or y.item(lv.i_delta) > 0.0:     # in contact
                 h_target = min(h_target, lv.in_contact_scale(d, dd, y.item(lv.i_vimp), self.contact_fraction))
