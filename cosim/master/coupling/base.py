@@ -57,6 +57,8 @@ class CouplingStrategy:
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"communication step = {step!r} s must be > 0")
         self.system = system
+        if getattr(system, "knots", 0):     # a strategy that hands knots over says so itself
+            system.use_knots(0)
         self.t0 = float(t0)
         self.t = float(t0)
         self.t_bound = float(t_bound)
