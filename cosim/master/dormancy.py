@@ -8,11 +8,21 @@ what it would have been given, the floors' states at the start of each skipped s
 When the gap may close again (or the run ends) the contact *wakes* and catches up, so that it
 is at the same time as the others and in the state it would have had:
 
-1. one step over the skipped interval up to the start of the last skipped step, from the
-   floors' states at its start: a skipped interval is a longer step out of contact;
+1. steps of up to ``span`` over the skipped interval up to the start of the last skipped step,
+   each from the floors' states at its start: a skipped interval is a longer step out of
+   contact;
 2. the last skipped step, from the floors' states at its start, as it would have been taken:
    the contact FMU learns the structures' motion from its last step (``fmu_src/resolver.py``,
    rule 1), so the step that follows is the one it would have taken without sleeping.
+
+A skipped step longer than ``span`` (a long step of the adaptive master, which only an asleep
+contact ever sees) is given to the contact in equal pieces of at most ``span``, the floors'
+states inside it interpolated between its ends (cubic Hermite: positions from the positions and
+velocities at both ends, velocities its derivative).  A resolved contact extrapolates the
+structures' motion of its last step over the next one (linearly in acceleration): over a 0.32 s
+step that extrapolation crosses gaps the floors never close, over ``span`` (4 base steps) it
+does not (tests/test_dormancy.py).  Only the flight out of contact depends on these states, and
+the proof says there is no contact in them.
 
 The master proved the gap open over the whole interval, so the catch-up must leave the
 contact as it was (no impact, no dissipation, no force).  A contact FMU that nevertheless
@@ -65,6 +75,9 @@ class Dormancy:
         self.sleeping: dict[str, _Sleep] = {}
         self._retired: list[Any] = []               # states freed at the next commit
         self._i_impacts: dict[str, int] = {}
+        #: per contact: the (position, velocity) input pairs ``x<i>``, ``v<i>`` for the Hermite
+        #: interpolation inside a long skipped step (None: inputs of another kind, not split)
+        self._pairs: dict[str, tuple[np.ndarray, np.ndarray] | None] = {}
         #: outputs that stay as they are over a step out of contact: the force (0) and the energy
         #: dissipated so far (the catch-up checks them, with the impacts counter)
         self._quiet: dict[str, np.ndarray] = {}
@@ -72,6 +85,7 @@ class Dormancy:
         for node in system.contacts:
             names = node.integers.names
             self._i_impacts[node.name] = names.index("impacts") if "impacts" in names else -1
+            self._pairs[node.name] = _position_velocity_pairs(list(node.inputs.names)[:node.A.shape[0]])
             self._quiet[node.name] = np.array([index[f"{node.name}.{v}"] for v in ("F", "E_dissipated")
                                                if f"{node.name}.{v}" in index], dtype=np.intp)
 
@@ -101,7 +115,7 @@ class Dormancy:
         if sleep is None:
             return
         self.stats["catch_ups"] += 1
-        skipped = sleep.skipped
+        skipped = self._split(node, sleep.skipped)
         inst, inputs = node.instance, node.inputs
         # pieces of consecutive skipped steps spanning at most `span` (a longer skipped step is a
         # piece alone), each from the floors' states at its start; then the last skipped step alone
@@ -135,6 +149,28 @@ class Dormancy:
             node.integers.get()
         self._retired.append((inst, sleep.state))
 
+    def _split(self, node: "Node", skipped: list) -> list:
+        """``skipped`` with every step longer than ``span`` cut into equal pieces of at most
+        ``span``, the inputs inside interpolated (module docstring)."""
+        pairs = self._pairs[node.name]
+        if pairs is None or all(h <= self.span * (1.0 + 1e-9) for _, h, _ in skipped):
+            return skipped
+        ix, iv = pairs
+        out = []
+        for k, (t, h, u0) in enumerate(skipped):
+            if h <= self.span * (1.0 + 1e-9):
+                out.append((t, h, u0))
+                continue
+            if k + 1 < len(skipped):
+                u1 = skipped[k + 1][2]
+            else:                                       # the last skipped step ends now
+                u1 = np.empty(node.A.shape[0])
+                node._inputs(self.system.y, u1)
+            m = math.ceil(h / self.span - 1e-9)
+            for j in range(m):
+                out.append((t + j * h / m, h / m, hermite(u0, u1, ix, iv, h, j / m)))
+        return out
+
     def wake_all(self) -> None:
         for node in self.system.contacts:
             if node.name in self.sleeping:
@@ -166,3 +202,26 @@ class Dormancy:
     @staticmethod
     def _free(instance, state) -> None:
         instance.free_state(state)
+
+
+def _position_velocity_pairs(names: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """Indices of the inputs ``x<i>`` and their ``v<i>`` when every input is one of such a pair."""
+    ix, iv = [], []
+    for i, name in enumerate(names):
+        if name.startswith("x") and ("v" + name[1:]) in names:
+            ix.append(i)
+            iv.append(names.index("v" + name[1:]))
+    if not ix or 2 * len(ix) != len(names):
+        return None
+    return np.array(ix, dtype=np.intp), np.array(iv, dtype=np.intp)
+
+
+def hermite(u0: np.ndarray, u1: np.ndarray, ix: np.ndarray, iv: np.ndarray, h: float, s: float) -> np.ndarray:
+    """Inputs at the fraction ``s`` of a step of ``h`` s: positions ``u[ix]`` by the cubic Hermite
+    through the positions and velocities ``u[iv]`` at both ends, velocities its derivative."""
+    x0, x1, v0, v1 = u0[ix], u1[ix], u0[iv], u1[iv]
+    s2, s3 = s * s, s * s * s
+    u = np.empty_like(u0)
+    u[ix] = (2 * s3 - 3 * s2 + 1) * x0 + (s3 - 2 * s2 + s) * h * v0 + (3 * s2 - 2 * s3) * x1 + (s3 - s2) * h * v1
+    u[iv] = ((6 * s2 - 6 * s) * (x0 - x1)) / h + (3 * s2 - 4 * s + 1) * v0 + (3 * s2 - 2 * s) * v1
+    return u
