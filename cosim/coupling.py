@@ -47,6 +47,10 @@ class CouplingStrategy:
     """
 
     name = "base"
+    #: how the buildings receive a contact's force under this strategy: the pounding.fmu
+    #: parameter ``host`` (fmu_src.impact.HOSTS) the master declares for every contact whose
+    #: scene leaves it unset; "any" lets the contact measure it
+    host = "any"
 
     def __init__(self, system: System, t0: float, t_bound: float, step: float):
         if not (step > 0 and math.isfinite(step)):
@@ -83,6 +87,7 @@ class GaussSeidel(CouplingStrategy):
     """Sequential: ground, then contacts (from the buildings at t), then buildings."""
 
     name = "gauss-seidel"
+    host = "zoh"        # building.fmu holds F exactly over the step it was computed for
 
     def __init__(self, system: System, t0: float, t_bound: float, step: float):
         super().__init__(system, t0, t_bound, step)
@@ -98,6 +103,7 @@ class Jacobi(CouplingStrategy):
     """Parallel: every instance reads the outputs at t, then all step."""
 
     name = "jacobi"
+    host = "zoh_late"   # ... over the step after
 
     def _advance(self, t: float, h: float) -> None:
         y = self.system.y

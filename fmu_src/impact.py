@@ -17,6 +17,7 @@ Pure physics (SI units, no FMI):
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 from dataclasses import dataclass, field, replace
 
@@ -403,44 +404,401 @@ class StepOutcome:
     impacts_completed: int = 0
 
 
+#: taps of a host's delivery kernel the observer identifies: a one-step-late (Jacobi) HHT-alpha
+#: host spreads one step's impulse over four steps (0, w0, w1, w2)
+_KERNEL_TAPS = 4
+#: identification rows after which an unclear edge is given up (the extrapolated structural
+#: motion it is measured against drifts away with the horizon)
+_MAX_EDGE_ROWS = 12
+#: standard error every identified weight must have at most: a weight off by e leaves
+#: e F h / m of our own force in the learnt structural increment of each step
+_WEIGHT_STANDARD_ERROR = 0.01
+#: |sum of the weights - 1| above which the host is inconsistent: it delivers more or less than
+#: the impulse we hand over (wiring, masses m1/m2 not those the host integrates)
+_MOMENTUM_TOLERANCE = 0.05
+#: weights below this are taken as zero (shortens the settling window); above the standard error
+_NEGLIGIBLE_WEIGHT = 0.02
+
+
+#: chi-square per row below which the rows fit a kernel (the row errors are estimated
+#: generously, so a consistent fit gives well under 1)
+_CHI2_CONSISTENT = 4.0
+#: weight of the latest clean step in the running mean square of the prediction errors
+_SCATTER_WEIGHT = 0.3
+#: part of a row's impulse taken as the error of its structural baseline from the structures'
+#: reaction to the force itself, which the clean stretch before the edge cannot show
+_REACTION = 0.01
+#: energy the hand-over's timing may have given the host before it is taken back, as a part of
+#: the impact's kinetic energy m v_imp^2 (rule 7 of ImpactResolver)
+_DEBT_TOLERANCE = 1e-4
+
+
+def _padded(w) -> tuple[float, ...]:
+    return (tuple(w) + (0.0,) * _KERNEL_TAPS)[:_KERNEL_TAPS]
+#: mean delivery delay [steps] assumed before the first impact has shown the host's: that of a
+#: zero-order hold in Gauss-Seidel order.  Any other guess costs more than it saves: handing the
+#: first impulse over a step early to a Gauss-Seidel host stops its bodies before they touch
+_ASSUMED_LEAD = 0.0
+
+
+def _hht_kernel(alpha: float, late: bool) -> tuple[float, ...]:
+    """Delivery kernel of an HHT-alpha host (alpha = 0: Newmark average acceleration) that takes
+    our F as its load at the step end: ``v += h ((1 - g) a_n + g a_(n+1))`` with
+    ``M a_(n+1) = (1 + alpha) p_(n+1) - alpha p_n``, ``g = 1/2 - alpha``; ``late``: one step late."""
+    g = 0.5 - alpha
+    w = (g * (1.0 + alpha), (1.0 - g) * (1.0 + alpha) - g * alpha, -(1.0 - g) * alpha)
+    w = w[:2] if alpha == 0.0 else w
+    return ((0.0,) + w) if late else w
+
+
+def _mean_delay(w) -> float:
+    """Mean delay of a kernel, in steps (0: the impulse reaches the host in its own step)."""
+    return sum(j * x for j, x in enumerate(w))
+
+
+#: kernels of the structural integrators in use: zero-order hold, symplectic Euler and velocity
+#: Verlet (1); Newmark average acceleration (1/2, 1/2); HHT-alpha; each also one step late
+_STANDARD_KERNELS = tuple(
+    kernel for late in (False, True)
+    for kernel in ((((0.0, 1.0) if late else (1.0,)),)
+                   + tuple(_hht_kernel(a, late) for a in (0.0, -0.05, -0.1, -0.15, -0.2, -0.25, -0.3, -1.0 / 3.0))))
+
+
+#: what a host may declare about itself (``pounding.fmu`` parameter ``host``): its delivery
+#: kernel, and whether its positions are exact for a force held over the step (then they are
+#: learnt from too, as the structures' displacement over the step).  ``any``: nothing declared,
+#: the kernel is identified from the host's response to the first impact.
+HOSTS = {
+    "any": None,
+    "zoh": ((1.0,), True),              # exact for a held force, Gauss-Seidel order (building.fmu)
+    "zoh_late": ((0.0, 1.0), True),     # the same one step late: Jacobi order (libcosim)
+    "trapezoidal": ((0.5, 0.5), False),           # Newmark average acceleration, F as load at the step end
+    "trapezoidal_late": ((0.0, 0.5, 0.5), False),  # the same, Jacobi order
+}
+
+
+class HostObserver:
+    """What the host does with our force, and the structures' own relative acceleration.
+
+    Over its step ``k`` every consistent host changes the relative velocity by
+
+        ``dV_k = A_k - h_k sum_j w_j F_(k-j) / m``
+
+    ``A_k``: the structures' contribution (storey springs, dampers, other contacts, as the host
+    integrates them); ``w``: the host's *delivery kernel* of our mean forces ``F``, with
+    ``sum w = 1`` (momentum).  Exact zero-order hold, symplectic Euler, velocity Verlet in
+    Gauss-Seidel order: ``w = (1)``; the same in Jacobi order: ``(0, 1)``; Newmark average
+    acceleration holding ``F`` as its load at the step end: ``(1/2, 1/2)``; HHT-alpha: three
+    taps (:func:`_hht_kernel`).  Position increments depend on the host's integrator and are
+    never used.
+
+    * ``A_k`` is *clean* -- free of our force -- when no force of ours can reach the observed
+      step (the last ``support`` forces are zero) or when ``w`` is known.  The structural
+      acceleration over the next step is the linear extrapolation of the last two clean
+      means; the difference between a clean increment and the one assumed is returned as
+      the correction of the resolver's own state.
+    * ``w`` is identified once, at the first contact *edge* that says it clearly.  After a
+      clean stretch the structural increments are extrapolated; the host's departures from
+      that extrapolation over the steps that follow our first force are the impulses it
+      delivered, ``h_k sum_j w_j F_(k-j)``: weighted least squares, each row weighted by the
+      scatter of the clean one-step predictions grown with the horizon.  Accepted as any
+      kernel when every weight is known to 0.01 (fine steps, free masses), or as one of the
+      standard hosts' kernels when it fits and excludes, by 5 sigma, every standard kernel
+      that times the impulse differently.  A sum of weights off 1 by more than 5 % marks the
+      host inconsistent (logged once): safe mode.
+    * While the kernel is unknown (and in safe mode) a step whose increment may hold our force
+      is not learnt from: the structural acceleration is held at the value it had reached.
+      Bodies that showed no structural motion before are then exactly right (free masses);
+      others drift from the host by what the structures do that the hold misses, without
+      feedback, until the edge is decided.  The hand-over is timed meanwhile for the latest
+      standard host the rows do not exclude (:meth:`_identify`).
+
+    Plain numbers and tuples only: ``copy.deepcopy`` saves it with the FMU state.
+    """
+
+    def __init__(self, m: float, extrapolate: bool = True, host: str = "any"):
+        if host not in HOSTS:
+            raise ValueError(f"host = {host!r} is not allowed: one of {', '.join(HOSTS)}")
+        self.m = m
+        self.extrapolate = extrapolate
+        declared = HOSTS[host]
+        self.exact_positions = bool(declared and declared[1])   # positions learnt from too
+        self.last = None            # (delta [m], delta_dot [m/s], h [s]) of the host at the last step start
+        self.forces = ()            # our mean forces [N] of the latest steps, latest first
+        self.means = ()             # clean structural mean accelerations [m/s^2], latest first
+        self.spans = ()             # their step sizes [s]
+        self.scatter = 0.0          # (m/s)^2, mean square error of the one-step prediction of clean increments
+        self.kernel = declared[0] if declared else None   # delivery weights w_0, w_1, ... (declared or identified)
+        self.inconsistent = False   # clear evidence that the host does not conserve momentum
+        self.provisional = _STANDARD_KERNELS[0]  # the standard kernel the edges so far fit best
+        self.provisional_lead = None  # steps, its mean delay (None: nothing measured yet)
+        self.a0 = 0.0               # m/s^2, structural relative acceleration at the step start
+        self.a1 = 0.0               # m/s^3, its rate over the step
+        self.predicted = 0.0        # m/s, structural rate change assumed over the last step
+        self.predicted_position = 0.0  # m, and the displacement, from rest
+        self.rows = ()              # rows of the current edge: (x, r, sigma, dV, used, t_mid, h)
+        self.edge_given_up = False  # the current edge gave no clear answer
+        self.clock = 0.0            # s, start of the observed step from the start of the edge
+        self.baseline = (0.0, 0.0)  # (m/s^2, m/s^3) structural acceleration extrapolated over the edge
+        self.internal = 0.0         # N s, impulse the resolver's own bodies received in the last step
+        self.timing = 0.0           # N s, impulse delivered to the host minus received internally, this episode
+        self.debt = 0.0             # J, energy the hand-over's timing gave the host this episode (_book_timing)
+        self.notices = []           # messages for the FMU log (drained by the adapter)
+
+    @property
+    def support(self) -> int:
+        """Steps over which one step's force reaches the host (the kernel's length)."""
+        return len(self.kernel) if self.kernel is not None else _KERNEL_TAPS
+
+    @property
+    def lead(self) -> float:
+        """Mean delay of the host's delivery [steps]: the kernel's, or the one assumed so far."""
+        if self.kernel is not None:
+            return _mean_delay(self.kernel)
+        return self.provisional_lead if self.provisional_lead is not None else _ASSUMED_LEAD
+
+    def pending(self) -> bool:
+        """True if part of an impulse we handed over may not have reached the host yet."""
+        return any(F != 0.0 for F in self.forces[:self.support - 1])
+
+    def structural_rate(self, r: float) -> float:
+        """Rate change [m/s] the structures give over the first ``r`` s of the current step."""
+        return self.a0 * r + 0.5 * self.a1 * r * r
+
+    def observe(self, delta: float, delta_dot: float, h: float) -> tuple[float, float]:
+        """Take the host's state at a step start; returns the correction (m, m/s) of the
+        structural motion assumed over the last step, and predicts the next step."""
+        cx = cu = 0.0
+        held = False
+        if self.last is not None:
+            D, V, hp = self.last
+            dV = delta_dot - V
+            hits = self.forces[:self.support]
+            quiet = not any(F != 0.0 for F in hits)
+            delivered = 0.0
+            if quiet:
+                clean = dV
+                self.rows, self.edge_given_up = (), False
+                if self.internal == 0.0:        # the episode is over
+                    self.timing = self.debt = 0.0
+            elif self.kernel is not None:
+                delivered = self._delivered(self.kernel, hits, hp)
+                clean = dV + delivered
+                self._book_timing(delivered * self.m, self.internal, clean)
+            else:
+                clean = None
+                verdict = None if self.inconsistent else self._edge(dV, hp, hits)
+                if verdict is not None:
+                    cx, cu = verdict
+            if clean is not None:
+                du = clean - self.predicted
+                if self.exact_positions:
+                    # the host's displacement over the step, minus what the delivered impulse
+                    # held over it does from rest: the structures' own
+                    moved = delta - D - V * hp + 0.5 * delivered * hp
+                    cx, cu = cx + moved - self.predicted_position, cu + du
+                    self._learn_step(clean, moved, hp)
+                else:
+                    cx, cu = cx + 0.5 * du * hp, cu + du
+                    self._learn(clean / hp, hp)
+                if quiet and self.means:
+                    self.scatter += _SCATTER_WEIGHT * (du * du - self.scatter)
+            held = clean is None
+        if not (self.exact_positions and not held and self.last is not None):
+            self._predict(held)
+        self.last = (delta, delta_dot, h)
+        return cx, cu
+
+    def record(self, F: float, h: float, internal: float) -> None:
+        """Book our mean force [N] of the step just taken, the impulse [N s] the resolver's own
+        bodies received in it, and what the structures were assumed to do."""
+        self.forces = ((F,) + self.forces)[:_KERNEL_TAPS]
+        self.internal = internal
+        self.predicted = self.structural_rate(h)
+        self.predicted_position = 0.5 * self.a0 * h * h + self.a1 * h * h * h / 6.0
+
+    def _book_timing(self, delivered: float, internal: float, clean: float) -> None:
+        """Energy the hand-over's timing gave the host over one observed step (rule 7).
+
+        With ``C`` the impulse delivered to the host minus the impulse the resolver's own bodies
+        received, cumulated, the host's relative velocity is the resolver's minus ``C / m``, so
+        the contact's work on the host exceeds its work on the resolver's bodies by
+        ``int C A dt`` over an episode (``A`` the structures' acceleration): zero for free
+        masses, zero for a hand-over on time, positive (energy created) for a late one while the
+        structures pull the bodies apart.  ``clean`` is ``A`` integrated over the step."""
+        C = self.timing + delivered - internal
+        self.debt += 0.5 * (self.timing + C) * clean
+        self.timing = C
+
+    # -- learning ---------------------------------------------------------------------------------
+    def _delivered(self, kernel, hits, hp: float) -> float:
+        """Rate change [m/s] the host gave our forces ``hits`` (latest first) over a step ``hp``."""
+        return hp * sum(w * F for w, F in zip(kernel, hits)) / self.m
+
+    def _learn(self, a: float, h: float) -> None:
+        self.means = ((a,) + self.means)[:2]
+        self.spans = ((h,) + self.spans)[:2]
+
+    def _learn_step(self, rate: float, moved: float, h: float) -> None:
+        """Exact positions: the linear acceleration that reproduces both structural increments
+        of the last step (rate [m/s], displacement [m]), continued over the next one."""
+        self._learn(rate / h, h)
+        if self.extrapolate:
+            b1 = 12.0 * (0.5 * rate * h - moved) / (h * h * h)
+            self.a0, self.a1 = rate / h + 0.5 * b1 * h, b1
+        else:
+            self.a0, self.a1 = rate / h, 0.0
+
+    def _predict(self, held: bool) -> None:
+        if held:                    # nothing learnt: hold the acceleration reached
+            self.a0 += self.a1 * self.last[2]
+            self.a1 = 0.0
+        elif not self.means:
+            self.a0 = self.a1 = 0.0
+        elif len(self.means) == 1 or not self.extrapolate:
+            self.a0, self.a1 = self.means[0], 0.0
+        else:
+            slope = (self.means[0] - self.means[1]) / (0.5 * (self.spans[0] + self.spans[1]))
+            self.a0 = self.means[0] + 0.5 * slope * self.spans[0]
+            self.a1 = slope
+
+    def _edge(self, dV: float, hp: float, hits):
+        """One step of an edge while the kernel is unknown: a row of its least-squares problem.
+
+        Returns the kernel's verdict, the correction (cx, cu) of the edge's steps, or None."""
+        if self.edge_given_up:
+            return None
+        if not self.rows:
+            # the edge starts with the observed step: its structural motion is measured
+            # against the extrapolation of the clean increments before it, a line in time
+            self.clock = 0.0
+            self.baseline = (self.a0, self.a1)
+        b0, b1 = self.baseline
+        P = b0 * hp + b1 * (self.clock * hp + 0.5 * hp * hp)
+        x = tuple(hp * F for F in (hits + (0.0,) * _KERNEL_TAPS)[:_KERNEL_TAPS])
+        r = (P - dV) * self.m                   # N s: the impulse the host delivered, if A = P
+        # error of the extrapolated structural increment: the RMS of the one-step
+        # predictions of the clean increments before the edge, grown with the horizon as
+        # a linear extrapolation's error does, (j + 1)(j + 2) / 2 after j steps;
+        # plus the structures' reaction to the force itself, taken as 1 % of the row's
+        # impulses; plus the round-off of the increments
+        j = self.clock / hp
+        scale = max(abs(v) for v in x)
+        sigma = self.m * math.sqrt(self.scatter) * 0.5 * (j + 1.0) * (j + 2.0) \
+            + _REACTION * scale + 1e-12 * (scale + (abs(dV) + abs(P)) * self.m)
+        self.rows = self.rows + ((x, r, sigma, dV, self.predicted, self.clock + 0.5 * hp, hp, self.internal),)
+        self.clock += hp
+        verdict = self._identify()
+        if verdict is None and self.rows:
+            self._book_edge(_padded(self.provisional))
+        return verdict
+
+    def _book_edge(self, kernel) -> None:
+        """Book the hand-over's timing over the edge's rows as ``kernel`` delivers them."""
+        self.timing = self.debt = 0.0
+        for x, _, _, dV, _, _, _, internal in self.rows:
+            delivered = sum(wj * xj for wj, xj in zip(kernel, x))
+            self._book_timing(delivered, internal, dV + delivered / self.m)
+
+    def _identify(self):
+        """Decide the kernel from the edge's rows if they say it clearly (class docstring);
+        returns the correction (cx, cu) of the edge's steps when decided, else None."""
+        rows = self.rows
+        X = np.array([row[0] for row in rows])
+        s = np.array([row[2] for row in rows])
+        Xw = X / s[:, None]
+        rw = np.array([row[1] for row in rows]) / s
+        # 1. any kernel, if the rows pin every weight down to 0.01
+        if len(rows) > _KERNEL_TAPS:
+            normal = Xw.T @ Xw
+            if np.linalg.cond(normal) < 1e14:
+                w = np.linalg.solve(normal, Xw.T @ rw)
+                se = np.sqrt(np.abs(np.diag(np.linalg.inv(normal))))
+                chi2 = float(np.sum((Xw @ w - rw) ** 2)) / (len(rows) - _KERNEL_TAPS)
+                if se.max() < _WEIGHT_STANDARD_ERROR and chi2 < _CHI2_CONSISTENT:
+                    return self._accept(w)
+        # 2. one of the standard hosts, if it fits and every host that times the impulse
+        #    differently (mean delay off by more than 0.1 step) is excluded by 5 sigma
+        chi2 = {w: float(np.sum((Xw @ np.array(_padded(w)) - rw) ** 2)) for w in _STANDARD_KERNELS}
+        best = min(chi2, key=chi2.get)
+        fits = chi2[best] < _CHI2_CONSISTENT * len(rows)
+        if fits and all(chi2[w] - chi2[best] > 25.0 for w in _STANDARD_KERNELS
+                        if abs(_mean_delay(w) - _mean_delay(best)) > 0.1):
+            return self._accept(np.array(_padded(best)))
+        if fits:
+            # meanwhile, time the hand-over for the earliest standard host the rows do not
+            # exclude: a hand-over a step early to a Gauss-Seidel host stops its bodies before
+            # they touch, which costs far more than a late one to a Jacobi host
+            self.provisional, self.provisional_lead = best, _mean_delay(best)
+        if len(rows) >= _MAX_EDGE_ROWS or not any(F != 0.0 for F in self.forces[:_KERNEL_TAPS - 1]):
+            self.edge_given_up = True
+            self.rows = ()
+        return None
+
+    def _accept(self, w):
+        """Book a kernel; returns the correction (cx, cu) of what the edge's steps assumed."""
+        rows, self.rows = self.rows, ()
+        total = float(w.sum())
+        if abs(total - 1.0) > _MOMENTUM_TOLERANCE:
+            self.inconsistent = True
+            self.notices.append(
+                f"the host delivers {total:.3g} times the impulse of F (delivery weights "
+                f"{', '.join(f'{x:.3g}' for x in w)}); a consistent host delivers it once "
+                f"(allowed: |sum - 1| <= {_MOMENTUM_TOLERANCE:g}). Check that F acts on body 2 along +x "
+                f"and on body 1 along -x, and that m1, m2 are the masses the host moves. Safe mode: the "
+                f"structures' motion is no longer learnt while an impulse is on its way")
+            return 0.0, 0.0
+        w = np.where(np.abs(w) < _NEGLIGIBLE_WEIGHT, 0.0, w)
+        w = w / w.sum()
+        self.kernel = tuple(float(x) for x in w[:int(np.flatnonzero(w)[-1]) + 1])
+        # the edge's structural increments, now clean: learn them, correct what was assumed
+        self.timing = self.debt = 0.0
+        cx = cu = 0.0
+        for x, _, _, dV, used, t_mid, hp, internal in rows:
+            delivered = sum(wj * xj for wj, xj in zip(self.kernel, x))
+            clean = dV + delivered / self.m
+            self._book_timing(delivered, internal, clean)
+            cu += clean - used
+            cx += (clean - used) * (self.clock - t_mid)
+            self._learn(clean / hp, hp)
+        return cx, cu
+
+
 class ImpactResolver:
     """Locate and integrate impacts inside a communication step, at the impact's own time scale.
 
     The host supplies ``delta`` [m] and ``delta_dot`` [m/s] at the start of each step and applies
-    the returned mean force over the step (zero-order hold).  Inside the step the relative motion
-    obeys ``delta_ddot = a_ext(s) - F / m``: the contact force on the effective mass plus the
+    the returned mean force over the step.  Inside the step the relative motion obeys
+    ``delta_ddot = a_ext(s) - F / m``: the contact force on the effective mass plus the
     *external* relative acceleration ``a_ext`` of the structures the bodies belong to (storey
     springs and dampers; zero for free masses).  Rules (docs/contact_models.md, "in-step rules"):
 
-    1. *Following the host.*  At every step start the host's increments over the last step are
-       split into what the resolver's own mean force did to two free masses
-       (``-F h / m`` in rate, ``-F h^2 / (2 m)`` in position) and the rest, the structures'
-       contribution.  The linear ``a_ext(s)`` that reproduces both increments of the last step,
-       continued, is the external acceleration assumed over the next step
-       (``extrapolate=False``: its mean ``dV / h``, constant).  The difference between the
-       structures' actual contribution and the one assumed is added to the internal state (in
-       and out of contact); the internal rate then equals the host's and the internal
-       penetration is the host's plus the host's zero-order-hold position error.  The force the
-       host held is ours of the same step (Gauss-Seidel) or of the step before (Jacobi),
-       recognised once, at the first step where the force starts or stops and the two
-       hypotheses are told apart 10:1 (Gauss-Seidel until then).  For free masses the structures'
-       contribution is zero to round-off: the free-mass results are unchanged.
-    2. *Onset*: out of contact, a new impact starts where the prediction
-       ``delta_eff + delta_dot s + int int a_ext`` crosses zero while approaching,
-       ``delta_eff = delta - offset``; ``v_imp`` is the rate there.  A step that starts
-       overlapping (a crossing the prediction missed) moves the overlap into ``offset``; the
-       impact starts at once if the bodies approach.
-    3. *During contact* the impact is integrated (Dormand-Prince 5(4), scaled by
+    1. *Following the host* (:class:`HostObserver`).  ``a_ext`` is learnt from the host's
+       velocity increments only, once our own force is taken out of them with the host's
+       identified delivery kernel (or when none of our force can be in them), and extrapolated
+       linearly over the next step.  Position increments, which depend on the host's
+       integrator, are never learnt from.
+    2. *Whose state.*  Out of contact, once every impulse handed over has reached the host, the
+       host's state is the truth (rule 4 for a residual overlap).  Through a contact and until
+       its impulse has reached the host, the resolver's own state is: it is corrected only by
+       the difference between the clean structural increment and the one assumed.  For free
+       masses that difference is zero whatever the host integrator, so an impact of free
+       masses is exact at any step.
+    3. *Onset*: out of contact, a new impact starts where the prediction
+       ``delta_eff + delta_dot s + int int a_ext`` crosses zero while approaching.
+       A step that starts overlapping (a crossing the prediction missed) moves the overlap
+       into ``offset``; the impact starts at once if the bodies approach.
+    4. *During contact* the impact is integrated (Dormand-Prince 5(4), scaled by
        ``L = (m v^2/k)^(1/(n+1))`` and ``T = L / v``) with located events at maximum
        penetration (``delta_dot = 0``), re-approach (``delta_dot`` rising again while loaded,
        the structure pushing back: same impact) and separation (``delta = 0``, or the raw
        force reaching zero for laws with a dashpot in restitution); it may straddle any number
        of steps, and several impacts may occur in one step.
-    4. *After separation* the host, moved by a constant mean force, may still overlap while
-       separating.  The next step records that apparent overlap as ``offset`` (>= 0, cleared once
-       the host's ``delta <= 0``); a force separation with ``delta > 0`` moves the remaining
+    5. *After separation* the host, moved by a held mean force, may still overlap while
+       separating.  Such an apparent overlap is kept as ``offset`` (>= 0, cleared once the
+       host's ``delta <= 0``); a force separation with ``delta > 0`` moves the remaining
        overlap into the offset as well.
-    5. *Impulse and energy*: the impulse is ``int F dt`` of the internal force history,
+    6. *Impulse and energy*: the impulse is ``int F dt`` of the internal force history,
        ``mean_force = impulse / h``.  ``E_dissipated`` is the work of the dissipative part of the
        force, ``int (F - k delta^n) delta_dot dt`` >= 0, integrated along the internal trajectory
        (plus, at a force separation, the elastic energy left in the overlap): it never decreases,
@@ -452,11 +810,11 @@ class ImpactResolver:
     """
 
     def __init__(self, law: ContactLaw, rtol: float = 1e-8, follow_host: bool = True,
-                 extrapolate: bool = True):
+                 extrapolate: bool = True, host: str = "any"):
         self.law = law
         self.rtol = rtol
         self.follow_host = follow_host
-        self.extrapolate = extrapolate
+        self.observer = HostObserver(law.m, extrapolate, host)
         self._kernels = {True: _scaled_kernel(law.model, law.zeta, law.n, True),
                          False: _scaled_kernel(law.model, law.zeta, law.n, False)}
         self._separations = (_scaled_separation(law), _scaled_separation_pulled(law))
@@ -471,13 +829,12 @@ class ImpactResolver:
         self.offset = 0.0           # m, apparent overlap left by a resolved impact
         self.delta_end = 0.0        # m, internal penetration at the end of the last step
         self.delta_dot_end = 0.0    # m/s
+        self.started = False        # a step has been taken
+        self.ahead = 0.0            # N s, impulse handed over ahead of the internal trajectory (rule 7)
         self.just_separated = False
         self.dtau = 1e-3            # next internal step, scaled
         self.a0 = 0.0               # m/s^2, external relative acceleration at the step start
-        self.a1 = 0.0               # m/s^3, its rate over the step (extrapolate=True only)
-        self.host = ()              # (delta, delta_dot, h, F, F before) of the previous step (rule 1)
-        self.held_late = False      # the host holds the force one step late (Jacobi): rule 1
-        self.held_known = False     # held_late decided on clear evidence (then final)
+        self.a1 = 0.0               # m/s^3, its rate over the step
         self.correction = (0.0, 0.0)  # (m, m/s) last correction applied to the internal state
         self.impacts = 0
         self.E_completed = 0.0      # J, all completed impacts
@@ -512,51 +869,23 @@ class ImpactResolver:
         """Position change [m] from the external acceleration over [t, t + r], from rest."""
         return 0.5 * self.a0 * r * r + self.a1 * (0.5 * t * r * r + r * r * r / 6.0)
 
-    def _follow(self, delta: float, delta_dot: float) -> None:
-        """Rule 1: measure the structures' contribution over the last step, correct, predict."""
-        if not (self.follow_host and self.host):
+    def _follow(self, delta: float, delta_dot: float, h: float) -> None:
+        """Rule 1-2: learn the structures' motion, correct the resolver's own state by the
+        difference between the clean structural increment and the one assumed."""
+        if not self.follow_host:
             self.a0 = self.a1 = 0.0
             return
-        D, V, hp, F, F_before = self.host
-        m = self.law.m
-        dV_assumed = self._ext_rate(0.0, hp)
-        base_v = delta_dot - V
-        # The host held our last mean force F over the step (Gauss-Seidel) or, one step late,
-        # the one before (Jacobi).  A wrong choice leaves a lasting rate error of
-        # (F - F_before) h / m.  The two differ by a whole step's impulse at the first step with
-        # force and at the first without; but an impact that starts late in a step, or ends
-        # with the structures pushing, makes that difference as small as the prediction error
-        # (Kobe at h = 5 ms: a 413 N first step read as Jacobi under a Gauss-Seidel host cost
-        # 4 % of the dissipated energy).  So the choice is made once, at the first such step
-        # where one hypothesis misses by a tenth of the difference or less; until then the
-        # host is taken as Gauss-Seidel (the master's scheme).
-        if not self.held_known and (F == 0.0) != (F_before == 0.0):
-            miss_same = abs(base_v + F * hp / m - dV_assumed)
-            miss_late = abs(base_v + F_before * hp / m - dV_assumed)
-            if min(miss_same, miss_late) <= 0.1 * abs(F - F_before) * hp / m:
-                self.held_late = miss_late < miss_same
-                self.held_known = True
-        F_held = F_before if self.held_late else F
-        # the host's increments minus what the held force alone does to free masses
-        dV = base_v + F_held * hp / m
-        dX = delta - D - V * hp + 0.5 * F_held * hp * hp / m
-        cu = dV - dV_assumed
-        cx = dX - self._ext_position(0.0, hp)
+        cx, cu = (float(c) for c in self.observer.observe(delta, delta_dot, h))
+        self.a0, self.a1 = float(self.observer.a0), float(self.observer.a1)
         self.correction = (cx, cu)
+        if cx == 0.0 and cu == 0.0:
+            return
         if self.in_contact:
             v, L = self.v_imp, self.law.length_scale(self.v_imp)
             self.d += cx / L
             self.u += cu / v
         self.delta_end += cx
         self.delta_dot_end += cu
-        if self.extrapolate:
-            # a(s) = b0 + b1 s over the last step fits both increments exactly; continue it
-            b1 = 12.0 * (0.5 * dV * hp - dX) / (hp * hp * hp)
-            self.a1 = b1
-            self.a0 = dV / hp + 0.5 * b1 * hp
-        else:
-            self.a0 = dV / hp
-            self.a1 = 0.0
 
     # -- one communication step ------------------------------------------------------------
     def step(self, delta: float, delta_dot: float, h: float) -> StepOutcome:
@@ -565,45 +894,93 @@ class ImpactResolver:
             raise ValueError(f"communication step h = {h!r} s is outside the allowed range h > 0")
         out = StepOutcome()
         delta, delta_dot = float(delta), float(delta_dot)
-        following = self.follow_host and bool(self.host)
-        self._follow(delta, delta_dot)
-        t = 0.0                                  # s into the step
-        if not self.in_contact:
-            d0, v0 = self._flight_start(delta, delta_dot, following)
+        self._follow(delta, delta_dot, h)
+        d0, v0 = (0.0, 0.0) if self.in_contact else self._flight_start(delta, delta_dot)
+        self._advance(0.0, h, d0, v0, out)
+        # the force law is compressive; a quadrature of a force that fades to zero at
+        # separation can sum to -1e-29 N s, which must not reach the host as tension
+        internal = max(out.impulse, 0.0)
+        lead = self.observer.lead if self.follow_host else 0.0
+        if lead > 0.0 or self.ahead != 0.0 or (self.follow_host and self.observer.debt > 0.0):
+            out.impulse, internal = self._hand_over(internal, lead, h)
+        else:
+            out.impulse = internal
+        out.mean_force = out.impulse / h
+        if self.follow_host:
+            self.observer.record(out.mean_force, h, internal)
+        self.started = True
+        return out
+
+    def _probe(self, h: float, span: float) -> float:
+        """Impulse [N s] the resolver's own bodies will receive over ``span`` s after this step."""
+        probe = copy.copy(self)
+        out = StepOutcome()
+        probe._advance(h, h + span, probe.delta_end, probe.delta_dot_end, out)
+        return max(out.impulse, 0.0)
+
+    def _hand_over(self, internal: float, lead: float, h: float) -> tuple[float, float]:
+        """Rule 7: the impulse [N s] to hand over this step, and the internal one to book.
+
+        The host delivers our force ``lead`` steps late on average: hand it over that much
+        early, so that it reaches the host's structures when it acts on the resolver's own
+        bodies (``ahead`` keeps the difference; momentum is exact over an episode).  While the
+        timing has given the host energy (the host's kernel was not yet known), hand over
+        early or late by the step that takes it back: ``int C A dt`` (HostObserver._book_timing)
+        changes by ``dJ A h`` when ``dJ`` is handed over one step early.
+        """
+        target = self._probe(h, lead * h) if lead > 0.0 else 0.0
+        debt = self.observer.debt
+        a_next = self.a0 + self.a1 * h
+        if debt > _DEBT_TOLERANCE * self.law.m * self.v_imp * self.v_imp and a_next != 0.0 \
+                and (self.in_contact or target > 0.0):
+            shift = -debt / (a_next * h)
+            if shift > 0.0:                       # early: at most the next step's impulse
+                shift = min(shift, self._probe(h, (lead + 1.0) * h) - target)
+            target += shift
+        emitted = max(internal + target - self.ahead, 0.0)
+        self.ahead += emitted - internal
+        if not self.in_contact and target <= 0.0 and self.ahead > 0.0:
+            # handed over for an impact the resolver's own motion did not make after all:
+            # the host has it, so the bodies have it (momentum)
+            self.delta_dot_end -= self.ahead / self.law.m
+            internal += self.ahead
+            self.ahead = 0.0
+        return emitted, internal
+
+    def _advance(self, t: float, t_end: float, d0: float, v0: float, out: StepOutcome) -> None:
+        """Flight and impacts from ``t`` to ``t_end`` [s] into the step (d0, v0: flight state at t)."""
         for _ in range(_MAX_IMPACTS_PER_STEP):
             if self.in_contact:
-                t = self._integrate(t, h, out)
+                t = self._integrate(t, t_end, out)
                 if self.in_contact:
-                    break
+                    return
                 d0, v0 = self._sep
-            s = self._onset(d0, v0, t, h - t)
+            s = self._onset(d0, v0, t, t_end - t)
             if s is None:
-                r = h - t
+                r = t_end - t
                 self.delta_end = d0 + v0 * r + self._ext_position(t, r)
                 self.delta_dot_end = v0 + self._ext_rate(t, r)
-                break
+                return
             v_on = v0 + self._ext_rate(t, s)
             t += s
             self._start(v_on)
             out.impacts_started += 1
-        # the force law is compressive; a quadrature of a force that fades to zero at
-        # separation can sum to -1e-29 N s, which must not reach the host as tension
-        out.impulse = max(out.impulse, 0.0)
-        out.mean_force = out.impulse / h
-        self.host = (delta, delta_dot, h, out.mean_force, self.host[3] if self.host else 0.0)
-        return out
 
-    def _flight_start(self, delta: float, delta_dot: float, following: bool):
-        """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 4)."""
-        if following:
-            # internal state carried over the last step and corrected: host - offset
-            inner = self.delta_end
-            # equal to the host's rate unless a late-held impulse is still pending
-            v0 = delta_dot if self.host[3] == 0.0 and self.host[4] == 0.0 else self.delta_dot_end
+    def _flight_start(self, delta: float, delta_dot: float):
+        """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 5)."""
+        if self.follow_host and self.started and self.observer.pending():
+            # part of an impulse is still on its way to the host: the resolver's own flight
+            d0, v0 = self.delta_end, self.delta_dot_end
+            self.offset = max(0.0, delta - d0) if delta > 0.0 else 0.0
+            if d0 > 0.0:
+                self.offset, d0 = self.offset + d0, 0.0
+            return d0, v0
+        if self.follow_host and self.started:
+            inner = self.delta_end               # internal flight, predicted over the last step
         else:
             inner = self.delta_end if self.just_separated else delta - self.offset
-            v0 = delta_dot
         self.just_separated = False
+        v0 = delta_dot
         offset = delta - inner
         if delta <= 0.0 or offset < 0.0:         # host open, or the host is behind the internal state
             offset = 0.0
@@ -678,7 +1055,7 @@ class ImpactResolver:
         tau_end = (h - t) / T
         # 1e-10: a pull below 1e-10 of the impact's force scale cannot clip the force before
         # round-off in 1 + zeta u does (see _scaled_separation_pulled)
-        self._separation = self._separations[min(al0, al0 + al1 * tau_end) < -1e-10]
+        self._separation = self._separations[1 if min(al0, al0 + al1 * tau_end) < -1e-10 else 0]
         u_ref = self.u                            # impulse = m (ext rate change - internal rate change)
         d, u = self.d, self.u
         # branch consistent with the (possibly corrected) state

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from fmu_src.contact_laws import MODELS, law_for
 from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, Variable
-from fmu_src.impact import ImpactResolver, PlainContact
+from fmu_src.impact import HOSTS, ImpactResolver, PlainContact
 
 _OUT = dict(causality="output")
 
@@ -51,6 +51,11 @@ class Pounding(Fmi2Slave):
         Variable("resolve_impacts", type="Boolean", start=True,
                  description="true: locate and integrate impacts inside each step; false: force law on the "
                              "current inputs only"),
+        Variable("host", type="String", start="any", choices=tuple(HOSTS),
+                 description="how the host applies F, if it declares it: 'zoh' exact for a force held over the "
+                             "step in Gauss-Seidel order (building.fmu), 'zoh_late' the same one step late "
+                             "(Jacobi), 'trapezoidal'/'trapezoidal_late' Newmark average acceleration; 'any': "
+                             "measured from the host's response to the first impact"),
         # inputs
         Variable("x1", causality="input", start=0.0, unit="m", description="displacement of body 1"),
         Variable("v1", causality="input", start=0.0, unit="m/s", description="velocity of body 1"),
@@ -100,7 +105,7 @@ class Pounding(Fmi2Slave):
     def initialize(self) -> None:
         law = law_for(self.model, self.k, self.n, self.m1, self.m2, self.CR, self.zeta)
         self.zeta_used = law.zeta
-        self._contact = ImpactResolver(law) if self.resolve_impacts else PlainContact(law)
+        self._contact = ImpactResolver(law, host=self.host) if self.resolve_impacts else PlainContact(law)
 
     def step(self, current_time: float, step_size: float) -> None:
         delta = self.x1 - self.x2 - self.gap
