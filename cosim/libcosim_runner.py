@@ -314,7 +314,16 @@ def run_ssp(path: Path | str, observe: Sequence[str], *, stop_time: float | None
 # isolation in a child process
 # ---------------------------------------------------------------------------------------------
 def _in_child(kind: str, target, observe: list[str], **kwargs) -> LibcosimResult:
-    """Run libcosim in a fresh Python process and return its result.
+    """Run libcosim in a fresh Python process and return its result (:func:`run_isolated`)."""
+    return run_isolated("cosim.libcosim_runner", (kind, target, observe, kwargs), LibcosimError, "libcosim")
+
+
+def run_isolated(module: str, request, error: type[Exception], tool: str, env_extra: dict | None = None):
+    """Run ``python -m module REQUEST ANSWER`` in a fresh process and return what it pickled.
+
+    ``request`` is pickled for the child; the child writes ``("ok", result)`` or
+    ``("error", text)``, and an error becomes ``error(text)``.  ``env_extra`` is added to
+    the child's environment.
 
     Why: libcosim steps the slaves from its own worker threads.  pythonfmu takes the
     GIL there, but the numpy/scipy code inside our FMUs then calls OpenBLAS from those
@@ -332,34 +341,31 @@ def _in_child(kind: str, target, observe: list[str], **kwargs) -> LibcosimResult
     import sys
 
     root = Path(__file__).resolve().parents[1]
-    with tempfile.TemporaryDirectory(prefix="libcosim_run_") as tmp:
-        request, answer = Path(tmp) / "request.pkl", Path(tmp) / "result.pkl"
-        request.write_bytes(pickle.dumps((kind, target, observe, kwargs)))
+    with tempfile.TemporaryDirectory(prefix=f"{tool}_run_") as tmp:
+        request_file, answer = Path(tmp) / "request.pkl", Path(tmp) / "result.pkl"
+        request_file.write_bytes(pickle.dumps(request))
         env = dict(os.environ)
-        env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+        env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join([str(root)] + [p for p in [env.get("PYTHONPATH")] if p])
-        proc = subprocess.run([sys.executable, "-m", "cosim.libcosim_runner", str(request), str(answer)],
+        proc = subprocess.run([sys.executable, "-m", module, str(request_file), str(answer)],
                               env=env, cwd=str(root), capture_output=True, text=True)
         if not answer.exists():
             tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
-            raise LibcosimError(f"libcosim child process failed (exit code {proc.returncode}):\n{tail}")
+            raise error(f"{tool} child process failed (exit code {proc.returncode}):\n{tail}")
         status, payload = pickle.loads(answer.read_bytes())
     if status == "error":
-        raise LibcosimError(payload)
+        raise error(payload)
     return payload
 
 
-def _child_main(request: str, answer: str) -> None:
+def answer_child(request: str, answer: str, work) -> None:
+    """The child side of :func:`run_isolated`: ``work(*request)`` pickled to ``answer``."""
     import os
     import pickle
     import traceback
 
-    kind, target, observe, kwargs = pickle.loads(Path(request).read_bytes())
     try:
-        if kind == "system":
-            result = ("ok", run_system(target, observe, isolate=False, **kwargs))
-        else:
-            result = ("ok", run_ssp(target, observe, isolate=False, **kwargs))
+        result = ("ok", work(*pickle.loads(Path(request).read_bytes())))
     except Exception as exc:  # carried back to the parent as text
         result = ("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}")
     partial = Path(answer).with_suffix(".partial")
@@ -368,6 +374,15 @@ def _child_main(request: str, answer: str) -> None:
     # Skip interpreter and library teardown: the result is safely on disk, and the exit
     # handlers of the FMUs' native libraries are where the problem above surfaces.
     os._exit(0)
+
+
+def _child_main(request: str, answer: str) -> None:
+    def work(kind, target, observe, kwargs):
+        if kind == "system":
+            return run_system(target, observe, isolate=False, **kwargs)
+        return run_ssp(target, observe, isolate=False, **kwargs)
+
+    answer_child(request, answer, work)
 
 
 if __name__ == "__main__":

@@ -160,9 +160,10 @@ class Scene:
             c, fl, fr = level.instance, level.floor_left, level.floor_right
             out += [Connection(level.left, f"x[{fl}]", c, "x1"), Connection(level.left, f"v[{fl}]", c, "v1"),
                     Connection(level.right, f"x[{fr}]", c, "x2"), Connection(level.right, f"v[{fr}]", c, "v2"),
-                    # F >= 0 is compressive: it pushes the left body to -x and the right one to +x
-                    Connection(c, "F", level.left, f"F[{fl}]", -1.0),
-                    Connection(c, "F", level.right, f"F[{fr}]", +1.0)]
+                    # the signed forces on each body (F1 = -F pushes the left body to -x, F2 = F
+                    # the right one to +x): no linear transformation, which some SSP tools ignore
+                    Connection(c, "F1", level.left, f"F[{fl}]"),
+                    Connection(c, "F2", level.right, f"F[{fr}]")]
         return out
 
 

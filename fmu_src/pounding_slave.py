@@ -65,6 +65,10 @@ class Pounding(Fmi2Slave):
         Variable("F", start=0.0, unit="N", **_OUT,
                  description="contact force, >= 0, on body 2 along +x and on body 1 along -x; resolved mode: "
                              "mean over the last step (F * h = impulse); plain mode: force law at the inputs"),
+        Variable("F1", start=0.0, unit="N", **_OUT,
+                 description="force on body 1 along +x, -F (wire it to body 1 without any sign change)"),
+        Variable("F2", start=0.0, unit="N", **_OUT,
+                 description="force on body 2 along +x, +F"),
         Variable("F_max", start=0.0, unit="N", **_OUT,
                  description="largest instantaneous contact force so far"),
         Variable("delta", start=0.0, unit="m", **_OUT,
@@ -124,6 +128,7 @@ class Pounding(Fmi2Slave):
             self.substeps = 1
             self.delta = delta
             self.delta_dot = delta_dot
+        self.F1, self.F2 = -self.F, self.F
         self.CR_achieved = 0.0 if c.last_CR != c.last_CR else c.last_CR   # NaN before the first impact ends
         self.E_last = c.last_E
         self.in_contact = c.in_contact
