@@ -528,10 +528,15 @@ class HostObserver:
         self.means = ()             # clean structural mean accelerations [m/s^2], latest first
         self.spans = ()             # their step sizes [s]
         self.scatter = 0.0          # (m/s)^2, mean square error of the one-step prediction of clean increments
-        self.kernel = declared[0] if declared else None   # delivery weights w_0, w_1, ... (declared or identified)
+        self.kernel = None          # delivery weights w_0, w_1, ... (declared or identified)
+        self.support = _KERNEL_TAPS # steps over which one step's force reaches the host (the kernel's length)
+        self.lead = _ASSUMED_LEAD   # steps, mean delay of the host's delivery: the kernel's, or assumed
+        self.quiet_steps = _KERNEL_TAPS  # steps since our last nonzero force
         self.inconsistent = False   # clear evidence that the host does not conserve momentum
         self.provisional = _STANDARD_KERNELS[0]  # the standard kernel the edges so far fit best
         self.provisional_lead = None  # steps, its mean delay (None: nothing measured yet)
+        if declared:
+            self._set_kernel(declared[0])
         self.a0 = 0.0               # m/s^2, structural relative acceleration at the step start
         self.a1 = 0.0               # m/s^3, its rate over the step
         self.predicted = 0.0        # m/s, structural rate change assumed over the last step
@@ -545,21 +550,15 @@ class HostObserver:
         self.debt = 0.0             # J, energy the hand-over's timing gave the host this episode (_book_timing)
         self.notices = []           # messages for the FMU log (drained by the adapter)
 
-    @property
-    def support(self) -> int:
-        """Steps over which one step's force reaches the host (the kernel's length)."""
-        return len(self.kernel) if self.kernel is not None else _KERNEL_TAPS
-
-    @property
-    def lead(self) -> float:
-        """Mean delay of the host's delivery [steps]: the kernel's, or the one assumed so far."""
-        if self.kernel is not None:
-            return _mean_delay(self.kernel)
-        return self.provisional_lead if self.provisional_lead is not None else _ASSUMED_LEAD
+    def _set_kernel(self, kernel) -> None:
+        self.kernel = kernel
+        self.support = len(kernel) if kernel is not None else _KERNEL_TAPS
+        self.lead = _mean_delay(kernel) if kernel is not None else \
+            (self.provisional_lead if self.provisional_lead is not None else _ASSUMED_LEAD)
 
     def pending(self) -> bool:
         """True if part of an impulse we handed over may not have reached the host yet."""
-        return any(F != 0.0 for F in self.forces[:self.support - 1])
+        return self.quiet_steps < self.support - 1
 
     def structural_rate(self, r: float) -> float:
         """Rate change [m/s] the structures give over the first ``r`` s of the current step."""
@@ -573,8 +572,8 @@ class HostObserver:
         if self.last is not None:
             D, V, hp = self.last
             dV = delta_dot - V
+            quiet = self.quiet_steps >= self.support
             hits = self.forces[:self.support]
-            quiet = not any(F != 0.0 for F in hits)
             delivered = 0.0
             if quiet:
                 clean = dV
@@ -612,7 +611,8 @@ class HostObserver:
     def record(self, F: float, h: float, internal: float) -> None:
         """Book our mean force [N] of the step just taken, the impulse [N s] the resolver's own
         bodies received in it, and what the structures were assumed to do."""
-        self.forces = ((F,) + self.forces)[:_KERNEL_TAPS]
+        self.forces = (F,) + self.forces[:_KERNEL_TAPS - 1]
+        self.quiet_steps = self.quiet_steps + 1 if F == 0.0 else 0
         self.internal = internal
         self.predicted = self.structural_rate(h)
         self.predicted_position = 0.5 * self.a0 * h * h + self.a1 * h * h * h / 6.0
@@ -730,6 +730,7 @@ class HostObserver:
             # exclude: a hand-over a step early to a Gauss-Seidel host stops its bodies before
             # they touch, which costs far more than a late one to a Jacobi host
             self.provisional, self.provisional_lead = best, _mean_delay(best)
+            self._set_kernel(None)
         if len(rows) >= _MAX_EDGE_ROWS or not any(F != 0.0 for F in self.forces[:_KERNEL_TAPS - 1]):
             self.edge_given_up = True
             self.rows = ()
@@ -750,7 +751,7 @@ class HostObserver:
             return 0.0, 0.0
         w = np.where(np.abs(w) < _NEGLIGIBLE_WEIGHT, 0.0, w)
         w = w / w.sum()
-        self.kernel = tuple(float(x) for x in w[:int(np.flatnonzero(w)[-1]) + 1])
+        self._set_kernel(tuple(float(x) for x in w[:int(np.flatnonzero(w)[-1]) + 1]))
         # the edge's structural increments, now clean: learn them, correct what was assumed
         self.timing = self.debt = 0.0
         cx = cu = 0.0
