@@ -307,8 +307,8 @@ _REAPPROACH_RATE = 1e-9
 #: guard against an endless impact/flight alternation inside one step (never reached in tests)
 _MAX_IMPACTS_PER_STEP = 1000
 #: branch switches (maximum penetration / re-approach) per step after which re-approach is no
-#: longer detected in that step: a quasi-static crvk contact would otherwise chatter at
-#: delta_dot = 0 where its force drops (never reached in the tests or the bundled scenes)
+#: longer detected in that step: a guard against chatter at delta_dot = 0 (a crvk contact held
+#: between its branches sticks instead, ImpactResolver._stick; never reached in the tests)
 _MAX_SWITCHES_PER_STEP = 200
 
 
@@ -800,7 +800,8 @@ class ImpactResolver:
     4. *During contact* the impact is integrated (Dormand-Prince 5(4), scaled by
        ``L = (m v^2/k)^(1/(n+1))`` and ``T = L / v``) with located events at maximum
        penetration (``delta_dot = 0``), re-approach (``delta_dot`` rising again while loaded,
-       the structure pushing back: same impact) and separation (``delta = 0``, or the raw
+       the structure pushing back: same impact), stick (a push between the two branches of a
+       law whose force drops at ``delta_dot = 0``: held, :meth:`_stick`) and separation (``delta = 0``, or the raw
        force reaching zero for laws with a dashpot in restitution); it may straddle any number
        of steps, and several impacts may occur in one step.
     5. *After separation* the host, moved by a held mean force, may still overlap while
@@ -830,6 +831,7 @@ class ImpactResolver:
         self._separation = self._separations[0]
         self.in_contact = False
         self.approaching = False
+        self.sticking = False       # held at delta_dot = 0 between the law's two branches (rule 4)
         self.v_imp = 0.0            # latched approach speed of the latest impact, m/s
         self.d = 0.0                # internal scaled penetration (in contact)
         self.u = 0.0                # internal scaled rate (in contact)
@@ -1032,6 +1034,7 @@ class ImpactResolver:
     def _start(self, v: float) -> None:
         self.in_contact = True
         self.approaching = True
+        self.sticking = False
         self.v_imp = max(v, MIN_IMPACT_SPEED)
         self.d, self.u, self.e, self.e_top = 0.0, 1.0, 0.0, 0.0
         self.impacts += 1
@@ -1068,7 +1071,9 @@ class ImpactResolver:
         u_ref = self.u                            # impulse = m (ext rate change - internal rate change)
         d, u = self.d, self.u
         # branch consistent with the (possibly corrected) state
-        if self.approaching and u <= 0.0:
+        if self.sticking:
+            u = 0.0                               # held: a correction of the rate goes into the force
+        elif self.approaching and u <= 0.0:
             self._switch_to_restitution(d, u, L)
         elif not self.approaching and u > _REAPPROACH_RATE:
             self.approaching = True
@@ -1093,6 +1098,14 @@ class ImpactResolver:
         separated = False
         switches = 0
         while tau < tau_end * (1.0 - 1e-15):
+            if self.sticking:
+                tau = self._stick(d, al0, al1, tau, tau_end, base, out, F0)
+                if self.sticking:
+                    break
+                f = self._kernels[self.approaching]
+                fs, p = f(d, 0.0)
+                acc = al0 + al1 * tau - fs
+                continue
             hs = min(dtau, tau_end - tau)
             last = hs >= tau_end - tau
             al_t = al0 + al1 * tau
@@ -1131,8 +1144,13 @@ class ImpactResolver:
                     nfev += self._sample(base + tau, f_end, d, u, al0 + al1 * tau - f_end, al0 + al1 * tau, al1,
                                          True, out, F0, branch_end=True)
                     self._switch_to_restitution(d, u, L)
-                else:                                     # re-approach: the dashpot acts again
+                    self.sticking = self._holds(d, al0 + al1 * tau)
+                else:                                     # re-approach: the dashpot acts again ...
                     self.approaching = True
+                    if self._holds(d, al0 + al1 * tau):   # ... unless its force would push back at once
+                        self.approaching, self.sticking, u = False, True, 0.0
+                if self.sticking:
+                    continue
                 f = self._kernels[self.approaching]
                 fs, p = f(d, u)
                 acc = al0 + al1 * tau - fs
@@ -1162,6 +1180,39 @@ class ImpactResolver:
         self.delta_dot_end = u * v
         self.delta_max = max(self.delta_max, d * L)
         return h
+
+    def _holds(self, d: float, alpha: float) -> bool:
+        """True if the contact sticks at scaled penetration ``d`` under the scaled external
+        acceleration ``alpha``: pushed together harder than the restitution branch holds at zero
+        rate, less than the approach branch does (crvk's force drop).  Neither branch is then
+        consistent; the solution is Filippov's sliding motion, as in cosim/reference.py."""
+        f_approach = self._kernels[True](d, 0.0)[0]
+        f_restitution = self._kernels[False](d, 0.0)[0]
+        return f_restitution < alpha < f_approach
+
+    def _stick(self, d, al0, al1, tau, tau_end, base, out, F0) -> float:
+        """Hold the penetration from ``tau`` while ``alpha(s) = al0 + al1 s`` stays between the
+        branches' forces at ``d``; returns where it leaves (into approach above the upper one,
+        restitution below the lower one) or ``tau_end``.  The force is ``alpha``: no work, no
+        dissipation; the impulse is the external rate change (_integrate's bookkeeping)."""
+        upper = self._kernels[True](d, 0.0)[0]
+        lower = self._kernels[False](d, 0.0)[0]
+        end = tau_end
+        if al1 > 0.0:
+            end = min(end, (upper - al0) / al1)
+        elif al1 < 0.0:
+            end = min(end, (lower - al0) / al1)
+        end = max(end, tau)
+        for s in (tau, end):                      # the force is linear in time: peaks at the ends
+            F = (al0 + al1 * s) * F0
+            out.peak_force = max(out.peak_force, F)
+            self.impact_peak = max(self.impact_peak, F)
+            self.F_max = max(self.F_max, F)
+        if end < tau_end:
+            self.sticking = False
+            self.approaching = al1 > 0.0
+        self._prev = ()
+        return end
 
     def _dissipated(self, d, u, d1, u1, al, al1, hs) -> float:
         """Scaled energy dissipated over one internal step from (d, u) to (d1, u1), length ``hs``.
