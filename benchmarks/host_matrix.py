@@ -1,10 +1,10 @@
-"""The host matrix of pounding.fmu (issue 13, point 3): every host of cosim/hosts.py, both
+"""The host matrix of pounding.fmu (issue 13, point 3): every host of cosim/peers/hosts.py, both
 coupling orders, every contact model for free masses, two structural cases at 0.1-10 ms.
 
     python benchmarks/host_matrix.py [--fmu PATH] [--quick]
 
 Prints the markdown tables quoted in docs/fmi_hosts.md and the wall time.  The tests
-(tests/test_host_matrix.py) assert the same criteria on the same cells (cosim.hosts).
+(tests/test_host_matrix.py) assert the same criteria on the same cells (cosim.peers.hosts).
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim import hosts  # noqa: E402
+from cosim.peers import hosts  # noqa: E402
 from fmu_src.contact_laws import MODELS  # noqa: E402
 
 RATIOS = (1e-3, 1e-2, 0.1, 0.5, 2.0)
@@ -75,12 +75,15 @@ def structure_table(unzip_dir, case, steps) -> list[str]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fmu", default=str(ROOT / "build" / "fmus" / "pounding.fmu"), help="pounding.fmu to test")
+    parser.add_argument("--fmu", default=None, help="pounding.fmu to test (default: built into build/fmus)")
     parser.add_argument("--quick", action="store_true", help="steps 1 and 10 ms only, no free masses")
     args = parser.parse_args(argv)
     from fmpy import extract
 
-    unzip_dir = extract(args.fmu)
+    from cosim.fmus import build_all
+
+    fmu = args.fmu or str(build_all(names=("pounding",))["pounding"])
+    unzip_dir = extract(fmu)
     t0 = time.perf_counter()
     if not args.quick:
         print("Free masses (the worked example, CR 0.4): each model in 8 hosts at h = "
@@ -96,9 +99,10 @@ def main(argv=None) -> int:
     for case in (hosts.two_oscillators(), hosts.two_shear_buildings()):
         print("\n".join(structure_table(unzip_dir, case, steps)), "\n")
     print(f"wall time {time.perf_counter() - t0:.0f} s")
-    import os
-    os._exit(0)
+    return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from cosim.master.fmi import exit_process
+
+    exit_process(main())

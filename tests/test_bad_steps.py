@@ -100,7 +100,7 @@ def test_restoring_a_state_allows_going_back(host):
 
 @pytest.mark.parametrize("fmu", ["building", "ground_motion"])
 def test_every_fmu_refuses_a_zero_step(fmu_path, tmp_path, fmu):
-    from cosim.fmi import FMU, FMUError
+    from cosim.master.fmi import FMU, FMUError
 
     with FMU(fmu_path(fmu)) as f:
         inst = f.instantiate("x")

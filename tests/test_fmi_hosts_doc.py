@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim import hosts
+from cosim.peers import hosts
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 EXAMPLE = DOCS / "examples" / "newmark_host.py"

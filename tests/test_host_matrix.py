@@ -3,13 +3,13 @@
 Each host is a few lines over fmpy's ``FMU2Slave`` (cosim/hosts.py): integrators exact for a
 held force (zero-order hold), semi-implicit (symplectic) Euler, Newmark average acceleration
 and HHT-alpha, each in Gauss-Seidel and in Jacobi order, none declaring anything to the FMU
-(``host = "any"``).  Criteria (the issue's, cosim.hosts.judge_*):
+(``host = "any"``).  Criteria (the issue's, cosim.peers.hosts.judge_*):
 
 * free masses, every model, steps of 1/1000 to 2 contact durations: peak force within 1 %,
-  CR within 0.005, one impact -- against solve_ivp (fmu_src.impact.simulate_impact);
+  CR within 0.005, one impact -- against solve_ivp (fmu_src.single_impact.simulate_impact);
 * two oscillators (every model) and two shear buildings pounding floor to floor, at 0.1 and 1 ms: the same
   impacts, peak force within 2 %, contact energy within 3 % of the monolithic reference
-  (cosim.reference, DOP853 at rtol 1e-10), and never more mechanical plus dissipated energy
+  (cosim.peers.reference, DOP853 at rtol 1e-10), and never more mechanical plus dissipated energy
   than was put in (1 % margin);
 * at 5 and 10 ms: within 10 % / 15 %.  Energy is created there, by hosts that apply the force
   late, at the first impact (the FMU cannot know the host's timing before it has seen the host
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import pytest
 
-from cosim import hosts
+from cosim.peers import hosts
 from fmu_src.contact_laws import MODELS
 
 HOSTS = [(i, o) for i in hosts.INTEGRATORS for o in hosts.ORDERS]

@@ -1,5 +1,5 @@
 """The contact's self-protection and its energy bookkeeping (issue 13, points 1 and 2), at the
-physics level (fmu_src.impact): the host's delivery kernel, the timing energy int C A dt, the
+physics level (fmu_src.host_observer, resolver, plausibility): the host's delivery kernel, the timing energy int C A dt, the
 inconsistent-host check and the plausibility watch.  The FMU-level behaviour (warnings in the
 log, fmi2Discard) is in tests/test_host_matrix.py."""
 from __future__ import annotations
@@ -7,10 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim import hosts
+from cosim.peers import hosts
 from fmu_src.contact_laws import law_for
-from fmu_src.impact import (HOSTS, ImpactResolver, PlainContact, PlausibilityWatch, _STANDARD_KERNELS,
-                            _hht_kernel, _mean_delay, simulate_impact)
+from fmu_src.host_observer import HOSTS, _STANDARD_KERNELS, _hht_kernel, _mean_delay
+from fmu_src.plain_contact import PlainContact
+from fmu_src.plausibility import PlausibilityWatch
+from fmu_src.resolver import ImpactResolver
+from fmu_src.single_impact import simulate_impact
 
 
 def free_host(resolver, m1, m2, v, h, steps, share=(1.0, 1.0), late=False):

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from cosim.reference import Contact, scene_inputs, solve_reference
+from cosim.peers.reference import Contact, scene_inputs, solve_reference
 from fmu_src.contact_laws import law_for
 from fmu_src.shear_building import ShearBuilding
 
@@ -106,7 +106,7 @@ def smoothed_reference(buildings, ground, contacts, stop_time, x0, v0, eps, rtol
 # -- the issue's case: El Centro, crvk, CR 0.65 ----------------------------------------------------
 @pytest.fixture(scope="module")
 def elcentro_crvk(catalog):
-    from cosim.scene import load_scene
+    from cosim.master.loader import load_scene
 
     # the first 10 s hold 8 impacts, six of them with a re-approach during unloading
     scene = load_scene("default", ['pounding.model="crvk"', "stop_time=10.0"], catalog)
@@ -181,8 +181,9 @@ def test_a_leaning_contact_sticks_and_matches_the_smoothed_solution():
 def test_pounding_fmu_sticks_like_the_reference(catalog, elcentro_crvk):
     """The in-step resolver holds a crvk contact between its branches the same way (it chattered
     between them before: +3.0 % dissipated energy on the whole record at 10 ms)."""
-    from cosim.master import System, simulate
-    from cosim.scene import load_scene
+    from cosim.master.loader import load_scene
+    from cosim.master.simulate import simulate
+    from cosim.master.system import System
 
     scene = load_scene("default", ['pounding.model="crvk"', "stop_time=10.0"], catalog)
     with System(scene, catalog) as system:

@@ -1,0 +1,398 @@
+"""What accuracy costs in time: every coupling strategy of a scene against the reference.
+
+    pounding-cosim accuracy default --out docs/accuracy/default
+    pounding-cosim accuracy kobe --out docs/accuracy/kobe      (or: python cosim/run.py kobe --accuracy ...)
+
+runs the scene with each strategy over a range of communication steps (or tolerances),
+compares each run with the monolithic reference (:mod:`cosim.peers.reference`, ``solve_ivp``
+DOP853 at rtol 1e-10) and with the OpenSees peer (:mod:`cosim.peers.opensees`) at several
+time steps, and writes ``accuracy.csv``, ``accuracy.md`` and ``accuracy.png`` (log-log
+error against wall time, one curve per strategy, the reference's own time marked).
+
+Strategies (:data:`FAMILIES`; every registered coupling strategy, :data:`cosim.master.coupling.STRATEGIES`, has at least one):
+
+* ``jacobi``: fixed step, every FMU reads the outputs at t, plain force law
+  (``resolve_impacts = false``);
+* ``gauss-seidel``: fixed step, ground, contacts, buildings in turn, plain force law;
+* ``gauss-seidel-resolved``: fixed coarse step, the contact FMU locates and integrates each
+  impact inside its own step (``resolve_impacts = true``) as an impact of two free masses;
+* ``adaptive``: :class:`cosim.master.coupling.adaptive.Adaptive`, plain force law, base step 0.01 s, the
+  setting is ``contact_fraction`` (step in contact / impact time scale);
+* ``adaptive-resolved`` (base step 0.01 s) and ``adaptive-resolved-0.02``: the same with the
+  contact FMU resolving its impacts;
+* ``opensees``: the OpenSees peer (Newmark average acceleration, ``JankowskiImpact``), fixed
+  ``dt``; its wall time is the analysis loop in its own process.
+
+Metrics (each run against the reference): relative errors of the peak contact force, of
+the dissipated energy and of the peak floor displacement of each building (the largest of
+the buildings), the number of impacts, and the largest error of the impact onset times (s;
+only when the counts agree; a co-simulation onset is known to within its communication
+step).  ``error`` is the largest of the three relative errors; ``meets_criteria`` applies
+:data:`CRITERIA` (peak force within 1 %, same number of impacts, dissipated energy within
+2 %, peak displacements within 0.5 %).  A run stopped by the stability guard
+(:class:`cosim.master.guard.InstabilityError`) is listed with its message instead of numbers.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ..files import replaced_folder
+from ..fmus import default_fmu_dir
+from ..master.coupling import STRATEGIES
+from ..master.guard import InstabilityError
+from ..master.loader import load_scene
+from ..master.results import impact_onsets, summarize
+from ..master.runner import settings
+from ..master.scene import Override
+from ..master.simulate import simulate
+from ..master.system import Catalog, System
+from ..peers.opensees import opensees_available, opensees_for_scene
+from ..peers.reference import reference_for_scene
+
+#: acceptance limits of the brief (relative errors; impacts must agree exactly)
+CRITERIA = dict(peak_force=0.01, dissipated_energy=0.02, peak_displacement=0.005)
+
+
+@dataclass(frozen=True)
+class Family:
+    """One strategy of the study: how to run it and the settings to sweep."""
+
+    name: str
+    coupling: str
+    resolve_impacts: bool
+    setting: str                       # "step" (s) or "contact_fraction" (-)
+    values: tuple[float, ...]
+    base_step: float | None = None     # adaptive: the largest step (s)
+
+
+FAMILIES = (
+    Family("jacobi", "jacobi", False, "step", (2e-3, 1e-3, 5e-4, 2.5e-4)),
+    Family("gauss-seidel", "gauss-seidel", False, "step", (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)),
+    Family("gauss-seidel-resolved", "gauss-seidel", True, "step", (2e-2, 1e-2, 5e-3, 2e-3, 1e-3)),
+    Family("adaptive", "adaptive", False, "contact_fraction", (1 / 8, 1 / 16, 1 / 32, 1 / 64, 1 / 128),
+           base_step=1e-2),
+    Family("adaptive-resolved", "adaptive", True, "contact_fraction", (1 / 2, 1 / 8), base_step=1e-2),
+    Family("adaptive-resolved-0.02", "adaptive", True, "contact_fraction", (1 / 2, 1 / 8), base_step=2e-2),
+)
+OPENSEES_DTS = (5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
+#: the reduced study of the tests: one cheap point per strategy, on a short run
+REDUCED_FAMILIES = (
+    Family("jacobi", "jacobi", False, "step", (1e-3,)),
+    Family("gauss-seidel", "gauss-seidel", False, "step", (1e-3,)),
+    Family("gauss-seidel-resolved", "gauss-seidel", True, "step", (1e-2,)),
+    Family("adaptive", "adaptive", False, "contact_fraction", (1 / 16, 1 / 64), base_step=1e-2),
+    Family("adaptive-resolved", "adaptive", True, "contact_fraction", (1 / 2,), base_step=1e-2),
+)
+
+
+@dataclass
+class Row:
+    """One run of the study (SI units; errors relative unless named ``_s``)."""
+
+    method: str
+    setting: str
+    value: float
+    status: str = "ok"                         # "ok", or why the run stopped
+    wall_time_s: float = math.nan
+    communication_steps: int = 0
+    rollbacks: int = 0
+    fmu_calls: int = 0
+    us_per_fmu_call: float = math.nan
+    energy_residual_relative: float = math.nan
+    peak_force_N: float = math.nan
+    impacts: int = 0
+    dissipated_energy_J: float = math.nan
+    err_peak_force: float = math.nan
+    err_dissipated_energy: float = math.nan
+    err_peak_displacement: float = math.nan
+    err_impact_time_s: float = math.nan
+    error: float = math.nan
+    meets_criteria: bool = False
+
+
+@dataclass
+class Study:
+    """Rows of one scene plus the reference they were measured against."""
+
+    scene: str
+    stop_time: float
+    reference: dict[str, Any]
+    rows: list[Row] = field(default_factory=list)
+    machine: str = ""
+
+    def best(self, method: str | None = None) -> Row | None:
+        """The fastest run that meets :data:`CRITERIA` (of ``method``, or of all)."""
+        ok = [r for r in self.rows if r.meets_criteria and (method is None or r.method == method)]
+        return min(ok, key=lambda r: r.wall_time_s) if ok else None
+
+
+# -- comparison ------------------------------------------------------------------------------------
+def _rel(value: float, ref: float) -> float:
+    return abs(value - ref) / abs(ref) if ref else abs(value)
+
+
+def reference_metrics(ref) -> dict[str, Any]:
+    """The numbers every run is compared with, from a :class:`cosim.peers.reference.ReferenceResult`."""
+    # total contact dissipation from the energy integral at the end: the per-impact values of
+    # the reference attribute the work of every contact active at the same time to each
+    return dict(peak_force_N=float(ref.peak_force_N), impacts=int(ref.impacts),
+                dissipated_energy_J=float(ref.energies.contact_dissipated[-1]),
+                peak_displacements_m=[float(np.max(p)) for p in ref.peak_displacements],
+                impact_times_s=sorted(float(i.t_onset) for i in ref.impact_list),
+                wall_time_s=float(ref.wall_time_s), nfev=int(ref.nfev), energy_residual_J=float(ref.energy_residual))
+
+
+def score(row: Row, ref: dict[str, Any], peak_force: float, impacts: int, dissipated: float,
+          peak_displacements: Sequence[float], onsets: Sequence[float]) -> Row:
+    """Fill the error columns of ``row`` from a run's numbers."""
+    row.peak_force_N, row.impacts, row.dissipated_energy_J = peak_force, impacts, dissipated
+    row.err_peak_force = _rel(peak_force, ref["peak_force_N"])
+    row.err_dissipated_energy = _rel(dissipated, ref["dissipated_energy_J"])
+    row.err_peak_displacement = max(_rel(u, r) for u, r in zip(peak_displacements, ref["peak_displacements_m"]))
+    if len(onsets) == len(ref["impact_times_s"]) and onsets:
+        row.err_impact_time_s = float(np.max(np.abs(np.asarray(onsets) - np.asarray(ref["impact_times_s"]))))
+    row.error = max(row.err_peak_force, row.err_dissipated_energy, row.err_peak_displacement)
+    row.meets_criteria = (impacts == ref["impacts"] and row.err_peak_force <= CRITERIA["peak_force"]
+                          and row.err_dissipated_energy <= CRITERIA["dissipated_energy"]
+                          and row.err_peak_displacement <= CRITERIA["peak_displacement"])
+    return row
+
+
+# -- runs ------------------------------------------------------------------------------------------
+def run_cosim(scene_name, family: Family, value: float, catalog, ref: dict[str, Any],
+              overrides: Sequence[Override | str] = (), stop_time: float | None = None, repeats: int = 1) -> Row:
+    """One co-simulation run of the study (the fastest of ``repeats``)."""
+    options: dict[str, Any] = {}
+    if family.setting == "step":
+        step = value
+    else:
+        step = family.base_step
+        options[family.setting] = value
+    extra = list(overrides) + [Override("pounding", "resolve_impacts", family.resolve_impacts)]
+    scene = load_scene(scene_name, extra + settings(family.coupling, step, stop_time), catalog)
+    row = Row(family.name, family.setting, value)
+    best = None
+    with System(scene, catalog) as system:
+        for _ in range(max(1, repeats)):
+            try:
+                result = simulate(system, progress=False, **options)
+            except InstabilityError as exc:
+                row.status = f"stopped: {exc}"
+                return row
+            if best is None or result.cost.wall_time_s < best.cost.wall_time_s:
+                best = result
+    summary = summarize(best)
+    cost = summary.cost
+    row.wall_time_s = cost.wall_time_s
+    row.communication_steps = cost.communication_steps
+    row.rollbacks = cost.rollbacks
+    row.fmu_calls = cost.fmu_calls
+    row.us_per_fmu_call = cost.us_per_fmu_call
+    row.energy_residual_relative = summary.energy_residual_relative
+    peaks = [summary.buildings[b.name].peak_displacement_m for b in scene.buildings]
+    return score(row, ref, summary.peak_force_N, summary.impacts, summary.dissipated_energy_J, peaks,
+                 impact_onsets(best))
+
+
+def run_peer(scene, dt: float, ref: dict[str, Any]) -> Row:
+    """One OpenSees run (JankowskiImpact) of the study."""
+    row = Row("opensees", "dt", dt)
+    try:
+        peer = opensees_for_scene(scene, dt)
+    except (RuntimeError, ValueError) as exc:
+        row.status = f"failed: {str(exc).splitlines()[0]}"
+        return row
+    row.wall_time_s = peer.wall_time_s
+    row.communication_steps = int(round(scene.stop_time / dt))
+    if not peer.converged:
+        row.status = f"failed: {peer.message}"
+        return row
+    algorithms = ", ".join(f"{k} {v}" for k, v in sorted(peer.algorithms.items()))
+    row.status = f"ok ({algorithms}; {peer.subdivided_steps} subdivided)"
+    onsets = []
+    for c in range(peer.contact_force.shape[1]):
+        on = peer.contact_force[:, c] > 0.0
+        onsets.extend(float(t) for t in peer.t[1:][on[1:] & ~on[:-1]])
+    return score(row, ref, peer.peak_force_N, peer.impacts, peer.dissipated_energy_J,
+                 [float(np.max(p)) for p in peer.peak_displacements], sorted(onsets))
+
+
+def run_study(scene_name: str, *, fmu_dir=None, catalog=None, overrides: Sequence[Override | str] = (),
+              families: Sequence[Family] | None = None, opensees_dts: Sequence[float] | None = None,
+              stop_time: float | None = None, repeats: int = 1, reference_rtol: float = 1e-10,
+              log: Callable[[str], None] | None = print) -> Study:
+    """Run the accuracy/time study of one scene (see module docstring)."""
+    families = FAMILIES if families is None else families
+    opensees_dts = OPENSEES_DTS if opensees_dts is None else opensees_dts
+    own = catalog is None
+    if own:
+        catalog = Catalog(fmu_dir if fmu_dir is not None else default_fmu_dir())
+    try:
+        scene = load_scene(scene_name, list(overrides) + settings(stop_time=stop_time), catalog)
+        say = log or (lambda s: None)
+        say(f"{scene.name}: reference (solve_ivp DOP853, rtol {reference_rtol:g}) ...")
+        ref = reference_metrics(reference_for_scene(scene, {"rtol": reference_rtol}))
+        say(f"  {ref['impacts']} impacts, peak force {ref['peak_force_N']:.6g} N, dissipated "
+            f"{ref['dissipated_energy_J']:.6g} J, wall {ref['wall_time_s']:.2f} s")
+        study = Study(scene.name, scene.stop_time, ref, machine=machine_note())
+        for family in families:
+            for value in family.values:
+                row = run_cosim(scene_name, family, value, catalog, ref, overrides, stop_time, repeats)
+                study.rows.append(row)
+                say("  " + _row_line(row))
+        if opensees_dts:
+            if opensees_available():
+                for dt in opensees_dts:
+                    row = run_peer(scene, dt, ref)
+                    study.rows.append(row)
+                    say("  " + _row_line(row))
+            else:
+                say("  openseespy not usable: OpenSees peer skipped")
+    finally:
+        if own:
+            catalog.close()
+    return study
+
+
+def machine_note() -> str:
+    import os
+    import platform
+
+    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
+            f"{platform.python_version()}; wall times are single runs on a machine shared with other "
+            f"processes (expect +-30 %)")
+
+
+def _row_line(r: Row) -> str:
+    head = f"{r.method:<22} {r.setting}={r.value:<9.4g}"
+    if not r.status.startswith("ok"):
+        return f"{head} {r.status[:160]}"
+    return (f"{head} wall {r.wall_time_s:7.3f} s  steps {r.communication_steps:6d}  rb {r.rollbacks:3d}  "
+            f"F {100 * r.err_peak_force:6.2f} %  E {100 * r.err_dissipated_energy:6.2f} %  "
+            f"u {100 * r.err_peak_displacement:6.3f} %  impacts {r.impacts}  "
+            f"{'MEETS' if r.meets_criteria else ''}")
+
+
+# -- output ----------------------------------------------------------------------------------------
+COLUMNS = [f for f in Row.__dataclass_fields__]
+
+
+def write_csv(study: Study, path: Path) -> None:
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
+        writer.writeheader()
+        for r in study.rows:
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(r).items()})
+
+
+def _pct(x: float) -> str:
+    return "" if not math.isfinite(x) else f"{100 * x:.3g}"
+
+
+def markdown(study: Study) -> str:
+    ref = study.reference
+    lines = [f"### Scene `{study.scene}` ({study.stop_time:g} s)", "",
+             f"Reference (solve_ivp DOP853, rtol 1e-10): {ref['impacts']} impacts, peak force "
+             f"{ref['peak_force_N']:.6g} N, dissipated energy {ref['dissipated_energy_J']:.6g} J, peak "
+             f"displacements {', '.join(f'{u:.5g}' for u in ref['peak_displacements_m'])} m, wall time "
+             f"{ref['wall_time_s']:.2f} s.", "",
+             "| method | setting | wall s | steps | rollbacks | FMU calls | us/call | impacts | peak F err % | "
+             "E diss err % | peak u err % | onset err ms | energy residual % | meets |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in study.rows:
+        if r.setting == "contact_fraction":
+            setting = f"contact_fraction = 1/{1 / r.value:.0f}"
+        else:
+            setting = f"{r.setting} = {r.value:.4g}"
+        if not r.status.startswith("ok"):
+            lines.append(f"| {r.method} | {setting} | | | | | | | | | | | | {r.status} |")
+            continue
+        onset = "" if not math.isfinite(r.err_impact_time_s) else f"{1e3 * r.err_impact_time_s:.3g}"
+        lines.append(
+            f"| {r.method} | {setting} | {r.wall_time_s:.3f} | {r.communication_steps} | {r.rollbacks} | "
+            f"{r.fmu_calls or ''} | {'' if not math.isfinite(r.us_per_fmu_call) else f'{r.us_per_fmu_call:.1f}'} | "
+            f"{r.impacts} | {_pct(r.err_peak_force)} | {_pct(r.err_dissipated_energy)} | "
+            f"{_pct(r.err_peak_displacement)} | {onset} | {_pct(r.energy_residual_relative)} | "
+            f"{'yes' if r.meets_criteria else 'no'} |")
+    best = study.best()
+    lines.append("")
+    if best is not None:
+        lines.append(f"Fastest run meeting the criteria: **{best.method}, {best.setting} = {best.value:.4g}**, "
+                     f"{best.wall_time_s:.3f} s.")
+    for method in sorted({r.method for r in study.rows}):
+        b = study.best(method)
+        lines.append(f"- {method}: " + (f"fastest meeting the criteria {b.setting} = {b.value:.4g}, "
+                                         f"{b.wall_time_s:.3f} s" if b else "no run meets the criteria"))
+    lines += ["", f"Machine: {study.machine}."]
+    return "\n".join(lines) + "\n"
+
+
+def plot(study: Study, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    markers = dict(zip(["jacobi", "gauss-seidel", "gauss-seidel-resolved", "adaptive", "adaptive-resolved",
+                        "adaptive-resolved-0.02", "opensees"], "sovDP*^"))
+    for method in dict.fromkeys(r.method for r in study.rows):
+        rows = sorted((r for r in study.rows if r.status.startswith("ok") and math.isfinite(r.error)),
+                      key=lambda r: r.wall_time_s)
+        rows = [r for r in rows if r.method == method]
+        if not rows:
+            continue
+        wall = [r.wall_time_s for r in rows]
+        err = [max(r.error, 1e-6) for r in rows]
+        line, = ax.loglog(wall, err, "-", marker=markers.get(method, "o"), mfc="none", label=method)
+        ok = [r for r in rows if r.meets_criteria]
+        if ok:
+            ax.loglog([r.wall_time_s for r in ok], [max(r.error, 1e-6) for r in ok], linestyle="none",
+                      marker=markers.get(method, "o"), color=line.get_color())
+    ax.axvline(study.reference["wall_time_s"], color="k", ls=":", lw=1)
+    ax.text(study.reference["wall_time_s"], ax.get_ylim()[1], " reference\n (solve_ivp)", va="top", fontsize=8)
+    ax.axhline(CRITERIA["peak_force"], color="grey", ls="--", lw=0.8)
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("largest relative error")
+    ax.set_title(f"{study.scene}: largest of the peak-force, dissipated-energy and peak-displacement errors\n"
+                 f"against wall time (filled: meets all criteria; dashed: 1 %)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def write_study(study: Study, folder: str | Path) -> Path:
+    """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` in ``folder`` (written complete)."""
+    with replaced_folder(folder) as tmp:
+        write_csv(study, tmp / "accuracy.csv")
+        (tmp / "accuracy.md").write_text(markdown(study))
+        plot(study, tmp / "accuracy.png")
+    return Path(folder)
+
+
+def study_and_write(scene: str, out: str | Path | None, overrides: Sequence[Override | str] = (), fmu_dir=None,
+                    stop_time: float | None = None, log: Callable[[str], None] | None = print) -> tuple[Study, Path]:
+    """Run the study of ``scene`` and write it into ``out`` (default ``out/<scene>_accuracy``)."""
+    study = run_study(scene, fmu_dir=fmu_dir, overrides=overrides, stop_time=stop_time, log=log)
+    folder = write_study(study, Path(out) if out else Path("out") / f"{study.scene}_accuracy")
+    return study, folder
+
+
+def _check_families() -> None:
+    """Every family runs a registered strategy, and every registered strategy is studied."""
+    unknown = {f.coupling for f in FAMILIES + REDUCED_FAMILIES} - set(STRATEGIES)
+    missing = set(STRATEGIES) - {f.coupling for f in FAMILIES}
+    if unknown or missing:
+        raise ValueError(f"accuracy study families: unknown couplings {sorted(unknown)}, "
+                         f"strategies without a family {sorted(missing)}")
+
+
+_check_families()

@@ -1,0 +1,495 @@
+"""The FMI layer: every call into an FMU goes through here.
+
+One choke point (:meth:`Instance.call` and the fast paths built on the same
+raw function table: :class:`RealPort`, :class:`IntegerPort`,
+:meth:`Instance.do_step`) calls the FMI 2.0 C functions of an fmpy
+``FMU2Slave``, checks the returned status in :meth:`Instance.check` and turns
+a failure into a typed :class:`FMUError` that carries the messages the
+instance logged through its own ``fmi2CallbackFunctions.logger``.
+
+Two pythonfmu facts shape this module:
+
+* pythonfmu forwards the slave's log messages only when the instance is
+  created with ``loggingOn = fmi2True``; we always do, and keep the last
+  messages of each instance in a bounded queue.
+* pythonfmu 0.7 cannot return ``fmi2Error`` from
+  ``fmi2ExitInitializationMode``: the package's slaves log the parameter
+  problem with status ``fmi2Error`` and return ``fmi2OK``.  :meth:`Instance.call`
+  therefore also fails a call during which the instance logged an error.
+
+Performance: fmpy's convenience methods (``getReal([...])``) allocate ctypes
+arrays on every call.  The hot loop instead uses ports with value references
+and a numpy buffer prepared once (``RealPort``), so one ``fmi2GetReal`` costs
+one ctypes call.  Measured on pythonfmu slaves: about 2-4 us per get or set,
+the slave's Python ``do_step`` dominating the rest.
+"""
+from __future__ import annotations
+
+import atexit
+import itertools
+import os
+import shutil
+import sys
+import weakref
+from collections import deque
+from ctypes import POINTER, byref, c_char_p, c_double, c_int, c_uint
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Mapping, NoReturn, Protocol, Sequence
+
+import numpy as np
+from fmpy import extract
+from fmpy.fmi1 import calloc, free
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+from .interface import VariableInfo, read_interface
+
+STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR = 0, 1, 2, 3
+
+
+def _dispatch_log(environment, instance_name, status, category, message) -> None:
+    """The one logger of the process: routes a message to its :class:`Instance`.
+
+    fmpy's native logger proxy (which formats the variadic C message) keeps a
+    single Python logger for the whole process, so per-instance loggers would
+    overwrite each other; each instance is told apart by the
+    ``componentEnvironment`` pointer of its own callbacks struct instead.
+    """
+    instance = _LIVE.get(environment or 0)
+    if instance is not None:
+        instance._log(status, category, message)
+
+
+# Process-wide by necessity (see _dispatch_log); entries vanish with their instance.
+_LIVE: "weakref.WeakValueDictionary[int, Instance]" = weakref.WeakValueDictionary()
+_IDS = itertools.count(1)
+_LOGGER = fmi2CallbackLoggerTYPE(_dispatch_log)
+_ALLOCATE = fmi2CallbackAllocateMemoryTYPE(calloc)
+_FREE = fmi2CallbackFreeMemoryTYPE(free)
+
+
+# Extracted FMUs, one folder per FMU file version, shared by every FMU object of
+# the process and removed at exit.  pythonfmu imports each slave module once per
+# interpreter (sys.modules), and the module keeps pointing at the folder it was
+# first imported from: deleting that folder while the process lives would break
+# every later instance of the same FMU.
+_EXTRACTED: dict[tuple[str, int, int], Path] = {}
+# Paths of the FMUs whose library has been loaded (never unloaded: see Instance.free).
+_LOADED: set[str] = set()
+
+
+def _extract_once(path: Path) -> Path:
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    folder = _EXTRACTED.get(key)
+    if folder is None or not folder.exists():
+        folder = _EXTRACTED[key] = Path(extract(str(path)))
+    return folder
+
+
+@atexit.register
+def _remove_extracted() -> None:
+    for folder in _EXTRACTED.values():
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def libraries_loaded() -> bool:
+    """True once an FMU's shared library has been loaded into this process."""
+    return bool(_LOADED)
+
+
+def exit_process(code: int | None) -> NoReturn:
+    """End a program that ran FMUs in this process, with exit status ``code``.
+
+    When the interpreter has been finalised and the C runtime runs the shared libraries'
+    destructors, with pythonfmu libraries still loaded, about one run in 25 aborts on a
+    corrupted heap ("corrupted double-linked list", caught in libgfortran's exit-time
+    close; PythonFMU issue #228 reports the same): a finished run then exits with 134.
+    Callers have closed everything they wrote.  So once a library is loaded, the process
+    flushes its output, removes the extracted FMUs and ends with ``os._exit``, skipping the
+    finalisation; otherwise it exits normally.
+    """
+    if not _LOADED:
+        raise SystemExit(code)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):   # closed or broken pipe: nothing left to save
+            pass
+    _remove_extracted()
+    os._exit(0 if code is None else code if isinstance(code, int) else 1)   # as SystemExit reads it
+
+
+class FMUError(RuntimeError):
+    """An FMI call failed.
+
+    ``str(error)`` is one line: the instance name and the first message the
+    instance logged (or the function and status if it logged nothing).
+    ``messages`` holds every warning/error message the instance logged, in
+    order; ``details`` joins them with the function and status.
+    """
+
+    def __init__(self, instance: str, function: str, status: int, messages: Sequence[str] = ()):
+        self.instance = instance
+        self.function = function
+        self.status = status
+        self.messages = list(messages)
+        label = STATUS[status] if 0 <= status < len(STATUS) else f"illegal status {status}"
+        if self.messages:
+            first = self.messages[-1].strip().splitlines()[0]
+            # the slaves already prefix their messages with the instance name
+            text = first if first.startswith(f"{instance}:") else f"{instance}: {first}"
+        else:
+            text = f"{instance}: {function} returned fmi2{label}"
+        super().__init__(text)
+
+    @property
+    def details(self) -> str:
+        head = f"{self.instance}: {self.function} failed with status {self.status}"
+        return "\n".join([head, *self.messages])
+
+
+@dataclass(frozen=True)
+class LogMessage:
+    status: int
+    category: str
+    text: str
+
+
+class PortProtocol(Protocol):
+    """A fixed list of variables of one type, read or written as one vector (``values``)."""
+
+    names: list[str]
+    values: np.ndarray
+
+    def get(self) -> np.ndarray: ...
+
+    def set(self, values: Any = None) -> None: ...
+
+
+class InstanceProtocol(Protocol):
+    """What the master asks of an FMU instance (:class:`Instance` is the real one; a fake with
+    the same methods runs a system without FMUs).  Times in s; ``calls`` counts FMI calls,
+    ``do_steps`` the doSteps."""
+
+    name: str
+    calls: int
+    do_steps: int
+
+    def setup(self, start_time: float = 0.0, stop_time: float | None = None) -> None: ...
+
+    def set(self, values: Mapping[str, Any]) -> None: ...
+
+    def exit_initialization(self) -> None: ...
+
+    def do_step(self, t: float, h: float) -> None: ...
+
+    def reset(self) -> None: ...
+
+    def terminate(self) -> None: ...
+
+    def free(self) -> None: ...
+
+    def get_state(self) -> Any: ...
+
+    def set_state(self, state: Any) -> None: ...
+
+    def free_state(self, state: Any) -> None: ...
+
+    def variable(self, name: str, causality: str | None = None) -> VariableInfo: ...
+
+    def real_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> PortProtocol: ...
+
+    def integer_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> PortProtocol: ...
+
+    def boolean_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> PortProtocol: ...
+
+
+class FMU:
+    """One FMU file: interface read and archive extracted once.
+
+    Create as many instances as needed with :meth:`instantiate`.  The
+    extracted folder is shared by every ``FMU`` object of the same file in the
+    process and removed at interpreter exit (see ``_EXTRACTED``); :meth:`close`
+    only detaches this object.  ``interface`` (:class:`~cosim.master.interface.FmuInterface`)
+    holds the variables, read from the modelDescription.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.interface = read_interface(self.path)
+        self.model_description = self.interface.model_description
+        self.name = self.path.stem
+        self.variables: dict[str, VariableInfo] = self.interface.variables
+        self.unzip_dir: Path | None = _extract_once(self.path)
+
+    def variable(self, name: str, causality: str | None = None) -> VariableInfo:
+        """Look a variable up by name (and causality), with a helpful error."""
+        return self.interface.variable(name, causality)
+
+    def names(self, causality: str | None = None, type: str | None = None) -> list[str]:
+        return self.interface.names(causality, type)
+
+    def unknown_variable_message(self, name: str, causality: str | None = None) -> str:
+        return self.interface.unknown_variable_message(name, causality)
+
+    def instantiate(self, instance_name: str) -> "Instance":
+        if self.unzip_dir is None:
+            raise RuntimeError(f"{self.path} was closed")
+        return Instance(self, instance_name)
+
+    def close(self) -> None:
+        self.unzip_dir = None
+
+    def __enter__(self) -> "FMU":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class Instance:
+    """One co-simulation instance of an :class:`FMU`, behind one choke point.
+
+    Life cycle: ``setup(t0, t_stop)`` (setupExperiment + enterInitializationMode),
+    ``set(...)`` parameters, ``exit_initialization()``, then ``do_step`` and
+    ports, ``reset()`` to go back to the instantiated state with start values,
+    ``free()``.  Counters: ``do_steps`` (fmi2DoStep calls) and ``calls`` (every
+    FMI call made through this object or its ports).
+    """
+
+    MAX_MESSAGES = 200
+
+    def __init__(self, fmu: FMU, name: str):
+        self.fmu = fmu
+        self.name = name
+        self.messages: deque[LogMessage] = deque(maxlen=self.MAX_MESSAGES)
+        self.errors_logged = 0
+        self.calls = 0
+        self.do_steps = 0
+        md = fmu.model_description
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = _LOGGER
+        self._callbacks.allocateMemory = _ALLOCATE
+        self._callbacks.freeMemory = _FREE
+        self._id = next(_IDS)
+        self._callbacks.componentEnvironment = self._id
+        _LIVE[self._id] = self
+        from fmpy.logging import addLoggerProxy  # formats the variadic C message for Python
+        addLoggerProxy(byref(self._callbacks))
+        self._slave = FMU2Slave(guid=md.guid, unzipDirectory=str(fmu.unzip_dir),
+                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        _LOADED.add(str(fmu.path))
+        self.functions = self._slave._functions  # raw ctypes functions, status returned as int
+        self._slave.instantiate(callbacks=self._callbacks, loggingOn=True)
+        self.component = self._slave.component
+        self.calls += 1
+        self._do_step = self.functions["fmi2DoStep"]
+        self._freed = False
+
+    # -- logging and status ------------------------------------------------------------------
+    def _log(self, status, category, message) -> None:
+        text = message.decode("utf-8", "replace") if message else ""
+        cat = category.decode("utf-8", "replace") if category else ""
+        self.messages.append(LogMessage(int(status), cat, text))
+        if status >= FMI2_ERROR:
+            self.errors_logged += 1
+
+    def problems(self, since: int = 0) -> list[str]:
+        """Texts of the warning/error messages logged (the last ``since`` errors if > 0)."""
+        texts = [m.text for m in self.messages if m.status >= FMI2_WARNING]
+        return texts[-since:] if since > 0 else texts
+
+    def check(self, function: str, status: int, errors_before: int | None = None) -> int:
+        """Raise :class:`FMUError` if ``status`` is worse than Warning, or if the
+        instance logged an error since ``errors_before``."""
+        new_errors = 0 if errors_before is None else self.errors_logged - errors_before
+        if status > FMI2_WARNING or new_errors > 0:
+            messages = [m.text for m in self.messages if m.status >= FMI2_ERROR]
+            if new_errors > 0:
+                messages = messages[-new_errors:]
+            elif not messages:
+                messages = self.problems()
+            raise FMUError(self.name, function, max(status, FMI2_ERROR if new_errors else status),
+                           messages[-5:])
+        return status
+
+    def call(self, function: str, *args) -> int:
+        """Call the FMI function ``function`` with ``args`` and check the outcome."""
+        before = self.errors_logged
+        status = self.functions[function](*args)
+        self.calls += 1
+        return self.check(function, status, before)
+
+    # -- life cycle --------------------------------------------------------------------------
+    def setup(self, start_time: float = 0.0, stop_time: float | None = None) -> None:
+        self.call("fmi2SetupExperiment", self.component, 0, 0.0, float(start_time),
+                  1 if stop_time is not None else 0, float(stop_time or 0.0))
+        self.call("fmi2EnterInitializationMode", self.component)
+
+    def exit_initialization(self) -> None:
+        self.call("fmi2ExitInitializationMode", self.component)
+
+    def do_step(self, t: float, h: float) -> None:
+        status = self._do_step(self.component, t, h, 1)
+        self.calls += 1
+        self.do_steps += 1
+        if status:
+            self.check("fmi2DoStep", status)
+
+    def reset(self) -> None:
+        """fmi2Reset: back to the instantiated state, every variable at its start value."""
+        self.call("fmi2Reset", self.component)
+
+    def terminate(self) -> None:
+        self.call("fmi2Terminate", self.component)
+
+    def free(self) -> None:
+        """fmi2FreeInstance.  The shared library stays loaded on purpose: a pythonfmu
+        library runs inside this interpreter, and unloading it while Python objects
+        it created may still be alive can corrupt the heap (cf. FMPy issue #147,
+        PythonFMU issue #228); every later instance of the FMU reuses it anyway."""
+        if not self._freed:
+            self._freed = True
+            self._slave.fmi2FreeInstance(self.component)
+            _LIVE.pop(self._id, None)
+
+    # -- FMU state (for rollback) ---------------------------------------------------------------
+    def get_state(self):
+        from fmpy.fmi2 import fmi2FMUstate
+
+        state = fmi2FMUstate()
+        self.call("fmi2GetFMUstate", self.component, byref(state))
+        return state
+
+    def set_state(self, state) -> None:
+        self.call("fmi2SetFMUstate", self.component, state)
+
+    def free_state(self, state) -> None:
+        self.call("fmi2FreeFMUstate", self.component, byref(state))
+
+    # -- variables -----------------------------------------------------------------------------
+    def variable(self, name: str, causality: str | None = None) -> VariableInfo:
+        return self.fmu.variable(name, causality)
+
+    def set(self, values: Mapping[str, Any]) -> None:
+        """Set variables by name, each with the setter of its declared type."""
+        for name, value in values.items():
+            info = self.variable(name)
+            vr = (c_uint * 1)(info.value_reference)
+            if info.type == "Real":
+                self.call("fmi2SetReal", self.component, vr, 1, (c_double * 1)(float(value)))
+            elif info.type in ("Integer", "Enumeration"):
+                if isinstance(value, bool) or float(value) != int(value):
+                    raise TypeError(f"{self.name}.{name} is an Integer, got {value!r}")
+                self.call("fmi2SetInteger", self.component, vr, 1, (c_int * 1)(int(value)))
+            elif info.type == "Boolean":
+                if not isinstance(value, (bool, np.bool_)):
+                    raise TypeError(f"{self.name}.{name} is a Boolean, got {value!r}")
+                self.call("fmi2SetBoolean", self.component, vr, 1, (c_int * 1)(int(bool(value))))
+            elif info.type == "String":
+                if not isinstance(value, str):
+                    raise TypeError(f"{self.name}.{name} is a String, got {value!r}")
+                self.call("fmi2SetString", self.component, vr, 1, (c_char_p * 1)(value.encode("utf-8")))
+            else:  # pragma: no cover - the package's FMUs have no other types
+                raise TypeError(f"{self.name}.{name}: unsupported type {info.type}")
+
+    def get(self, names: Iterable[str]) -> dict[str, Any]:
+        """Get variables by name, each with the getter of its declared type."""
+        out = {}
+        for name in names:
+            info = self.variable(name)
+            vr = (c_uint * 1)(info.value_reference)
+            if info.type == "Real":
+                value = (c_double * 1)()
+                self.call("fmi2GetReal", self.component, vr, 1, value)
+                out[name] = value[0]
+            elif info.type in ("Integer", "Enumeration", "Boolean"):
+                value = (c_int * 1)()
+                self.call("fmi2Get" + ("Boolean" if info.type == "Boolean" else "Integer"),
+                          self.component, vr, 1, value)
+                out[name] = bool(value[0]) if info.type == "Boolean" else int(value[0])
+            elif info.type == "String":
+                value = (c_char_p * 1)()
+                self.call("fmi2GetString", self.component, vr, 1, value)
+                out[name] = (value[0] or b"").decode("utf-8")
+        return out
+
+    def real_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> "RealPort":
+        return RealPort(self, names, buffer)
+
+    def integer_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> "IntegerPort":
+        return IntegerPort(self, names, buffer)
+
+    def boolean_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> "BooleanPort":
+        return BooleanPort(self, names, buffer)
+
+    def __repr__(self) -> str:
+        return f"Instance({self.name!r} of {self.fmu.path.name})"
+
+
+class _Port:
+    """A fixed list of variables of one type read or written as one vector.
+
+    ``values`` is a numpy array (possibly a view into a larger array owned by
+    the caller) that ``get`` fills and ``set`` sends, without allocation.
+    """
+
+    _ctype: Any = c_double
+    _dtype: Any = np.float64
+    _type = "Real"
+
+    def __init__(self, instance: Instance, names: Sequence[str], buffer: np.ndarray | None = None):
+        self.instance = instance
+        self.names = list(names)
+        infos = [instance.variable(n) for n in self.names]
+        wrong = [i.name for i in infos if i.type != self._type]
+        if wrong:
+            raise TypeError(f"{instance.name}: {wrong} are not {self._type} variables")
+        n = len(self.names)
+        if buffer is None:
+            buffer = np.zeros(n, dtype=self._dtype)
+        if buffer.shape != (n,) or buffer.dtype != self._dtype or not buffer.flags.c_contiguous:
+            raise ValueError(f"port buffer must be a contiguous {self._dtype.__name__} vector of {n}")
+        self.values = buffer
+        self._n = n
+        self._vr = (c_uint * n)(*[i.value_reference for i in infos])
+        self._ptr = buffer.ctypes.data_as(POINTER(self._ctype))
+        self._get = instance.functions[f"fmi2Get{self._type}"]
+        self._set = instance.functions[f"fmi2Set{self._type}"]
+        self._component = instance.component
+
+    def get(self) -> np.ndarray:
+        if self._n:
+            status = self._get(self._component, self._vr, self._n, self._ptr)
+            self.instance.calls += 1
+            if status:
+                self.instance.check(f"fmi2Get{self._type}", status)
+        return self.values
+
+    def set(self, values: Any = None) -> None:
+        if values is not None:
+            self.values[:] = values
+        if self._n:
+            status = self._set(self._component, self._vr, self._n, self._ptr)
+            self.instance.calls += 1
+            if status:
+                self.instance.check(f"fmi2Set{self._type}", status)
+
+
+class RealPort(_Port):
+    pass
+
+
+class IntegerPort(_Port):
+    _ctype = c_int
+    _dtype = np.int32
+    _type = "Integer"
+
+
+class BooleanPort(IntegerPort):
+    """fmi2Boolean is a C int: 0 or 1 in an int32 buffer."""
+
+    _type = "Boolean"

@@ -1,0 +1,262 @@
+"""System assembly: the FMU instances of a scene, parameterised and connected.
+
+:class:`Catalog` loads each FMU file once (model description read, archive
+extracted once).  :class:`System` instantiates exactly the instances a
+:class:`~cosim.master.scene.Scene` calls for, sets every parameter as an FMU
+variable, and wires the scene's connections as one linear map per instance:
+``u_i = A_i @ y`` where ``y`` is the vector of every Real output of every
+instance (each instance's outputs are a view into ``y``, filled in place by
+``fmi2GetReal``).  :func:`cosim.master.simulate.simulate` advances a system with a
+coupling strategy (:mod:`cosim.master.coupling`).
+
+A catalog maps FMU names to objects with ``interface`` and ``instantiate(name)``; the
+instances honour the protocol of :class:`cosim.master.fmi.Instance`
+(:class:`~cosim.master.fmi.InstanceProtocol`), so a catalog of fakes builds a system with
+no FMU at all (the coupling strategies' tests do).
+
+Reuse (parameter studies): build the ``System`` once, then for each case
+``system.reset(scene)`` (fmi2Reset + parameters of the new scene, same
+instances and connections) and ``simulate(system, ...)`` again.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+import numpy as np
+
+from ..fmus import BUILDING, FMU_NAMES, fmu_spec
+from .fmi import FMU, InstanceProtocol, PortProtocol
+from .names import column
+
+if TYPE_CHECKING:
+    from .scene import InstanceSpec, Scene
+
+
+class Catalog(Mapping[str, FMU]):
+    """The package's FMUs in one folder, each loaded (extracted) once."""
+
+    def __init__(self, fmu_dir: str | Path, names: Sequence[str] = FMU_NAMES):
+        self.fmu_dir = Path(fmu_dir)
+        self._fmus: dict[str, FMU] = {}
+        try:
+            for name in names:
+                self._fmus[name] = FMU(self.fmu_dir / f"{name}.fmu")
+        except Exception:
+            self.close()
+            raise
+
+    def __getitem__(self, name: str) -> FMU:
+        return self._fmus[name]
+
+    def __iter__(self):
+        return iter(self._fmus)
+
+    def __len__(self) -> int:
+        return len(self._fmus)
+
+    def close(self) -> None:
+        for fmu in self._fmus.values():
+            fmu.close()
+
+    def __enter__(self) -> "Catalog":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass
+class Node:
+    """One instance in the system: its ports and its input map.
+
+    ``outputs.values`` is a view of ``System.y``; ``inputs`` are set from
+    ``A @ y`` by :meth:`pull`.  ``integers`` and ``booleans`` hold the Integer
+    (impacts) and Boolean (in_contact) outputs, views of ``System.ints``.
+    """
+
+    spec: "InstanceSpec"
+    instance: InstanceProtocol
+    outputs: PortProtocol
+    integers: PortProtocol
+    booleans: PortProtocol
+    inputs: PortProtocol
+    A: np.ndarray
+    kind: str                   # the FMU's role: "ground", "contact" or "building"
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def pull(self, y: np.ndarray) -> None:
+        """Set the inputs from the current outputs of the system."""
+        if self.A.shape[0]:
+            np.dot(self.A, y, out=self.inputs.values)
+            self.inputs.set()
+
+    def push(self) -> None:
+        """Read the outputs (into the system's ``y``)."""
+        self.outputs.get()
+        self.integers.get()
+        self.booleans.get()
+
+    def step(self, y: np.ndarray, t: float, h: float) -> None:
+        """pull, fmi2DoStep, push."""
+        self.pull(y)
+        self.instance.do_step(t, h)
+        self.push()
+
+
+class System:
+    """The FMU instances of a scene, parameterised and connected.
+
+    Attributes: ``nodes`` (Gauss-Seidel order: ground, contacts, buildings),
+    ``ground`` / ``contacts`` / ``buildings`` (lists of nodes), ``y`` (every
+    Real output), ``ints`` (every Integer and Boolean output), ``columns`` (names
+    ``instance.variable`` of ``y`` then ``ints``).
+    """
+
+    def __init__(self, scene: "Scene", catalog: Mapping[str, Any]):
+        self.scene = scene
+        self.catalog = catalog
+        self.nodes: list[Node] = []
+        self.t0 = 0.0
+        created: list[InstanceProtocol] = []
+        try:
+            self._build(scene, created)
+        except Exception:
+            for inst in created:
+                inst.free()
+            raise
+        self.initialized = False
+
+    # -- assembly --------------------------------------------------------------------------------
+    def _output_names(self, spec: "InstanceSpec", fmu: Any, type: str) -> list[str]:
+        interface = fmu.interface
+        names = interface.names("output", type)
+        if spec.fmu == BUILDING:  # only the floors the building uses
+            n = int(spec.parameters["n_storeys"])
+            names = [x for x in names if (interface.variables[x].index or 0) <= n]
+        return names
+
+    def _build(self, scene: "Scene", created: list[InstanceProtocol]) -> None:
+        specs = scene.instances()
+        out_names = {s.name: self._output_names(s, self.catalog[s.fmu], "Real") for s in specs}
+        int_names = {s.name: self._output_names(s, self.catalog[s.fmu], "Integer") for s in specs}
+        bool_names = {s.name: self._output_names(s, self.catalog[s.fmu], "Boolean") for s in specs}
+        offsets, n_y = {}, 0
+        for s in specs:
+            offsets[s.name] = n_y
+            n_y += len(out_names[s.name])
+        n_i = sum(len(int_names[s.name]) + len(bool_names[s.name]) for s in specs)
+        self.y = np.zeros(n_y)
+        self.ints = np.zeros(n_i, dtype=np.int32)
+        self.columns = [column(s.name, v) for s in specs for v in out_names[s.name]] + \
+                       [column(s.name, v) for s in specs for v in int_names[s.name] + bool_names[s.name]]
+        index = {c: i for i, c in enumerate(self.columns[:n_y])}
+
+        # inputs each instance receives, in a fixed order, and the map A from y
+        in_names: dict[str, list[str]] = {s.name: [] for s in specs}
+        for c in scene.connections():
+            if c.input not in in_names[c.target]:
+                in_names[c.target].append(c.input)
+        matrices = {s.name: np.zeros((len(in_names[s.name]), n_y)) for s in specs}
+        for c in scene.connections():
+            matrices[c.target][in_names[c.target].index(c.input), index[column(c.source, c.output)]] += c.factor
+
+        i_offset = 0
+        for s in specs:
+            fmu = self.catalog[s.fmu]
+            inst = fmu.instantiate(s.name)
+            created.append(inst)
+            o = offsets[s.name]
+            outputs = inst.real_port(out_names[s.name], self.y[o:o + len(out_names[s.name])])
+            ni = len(int_names[s.name])
+            integers = inst.integer_port(int_names[s.name], self.ints[i_offset:i_offset + ni])
+            i_offset += ni
+            nb = len(bool_names[s.name])
+            booleans = inst.boolean_port(bool_names[s.name], self.ints[i_offset:i_offset + nb])
+            i_offset += nb
+            for name in in_names[s.name]:
+                inst.variable(name, "input")
+            inputs = inst.real_port(in_names[s.name])
+            kind = fmu_spec(s.fmu).role
+            self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind))
+        self.ground = [n for n in self.nodes if n.kind == "ground"]
+        self.contacts = [n for n in self.nodes if n.kind == "contact"]
+        self.buildings = [n for n in self.nodes if n.kind == "building"]
+
+    def node(self, name: str) -> Node:
+        for n in self.nodes:
+            if n.name == name:
+                return n
+        raise KeyError(name)
+
+    @property
+    def instances(self) -> dict[str, InstanceProtocol]:
+        return {n.name: n.instance for n in self.nodes}
+
+    # -- life cycle ------------------------------------------------------------------------------
+    def initialize(self, t0: float = 0.0, stop_time: float | None = None, host: str | None = None) -> None:
+        """setupExperiment, parameters, exit initialisation; read the outputs at t0.
+
+        Sources and buildings leave initialisation first so that each contact
+        instance starts from the buildings' initial floor states.  ``host``: the
+        pounding.fmu parameter of that name for every contact whose scene does not
+        set it (the coupling strategy's ``host``).
+        """
+        self.t0 = t0
+        stop_time = self.scene.stop_time if stop_time is None else stop_time
+        for n in self.nodes:
+            n.instance.setup(t0, stop_time)
+            n.instance.set(n.spec.parameters)
+            if host is not None and n.kind == "contact" and "host" not in n.spec.parameters:
+                n.instance.set({"host": host})
+        self.y[:] = 0.0
+        self.ints[:] = 0
+        for n in self.ground + self.buildings + self.contacts:
+            n.pull(self.y)
+            n.instance.exit_initialization()
+            n.push()
+        for n in self.buildings:  # contact outputs at t0 (forces are zero unless overlapping)
+            n.pull(self.y)
+        self.initialized = True
+
+    def reset(self, scene: "Scene | None" = None) -> None:
+        """fmi2Reset every instance and apply the parameters of ``scene`` (default:
+        the current one).  The new scene must have the same instances and
+        connections (same buildings, storey counts and contact levels)."""
+        if scene is not None:
+            if [(s.name, s.fmu) for s in scene.instances()] != [(n.name, n.spec.fmu) for n in self.nodes] or \
+                    scene.connections() != self.scene.connections() or \
+                    [scene.n_storeys(b.name) for b in self.buildings] != [b.spec.parameters["n_storeys"] for b in self.buildings]:
+                raise ValueError("System.reset: the new scene has other instances or connections; build a new System")
+            for n, s in zip(self.nodes, scene.instances()):
+                n.spec = s
+            self.scene = scene
+        for n in self.nodes:
+            n.instance.reset()
+        self.initialized = False
+
+    def terminate(self) -> None:
+        for n in self.nodes:
+            n.instance.terminate()
+
+    def close(self) -> None:
+        for n in self.nodes:
+            n.instance.free()
+        self.nodes = []
+
+    def __enter__(self) -> "System":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- counters --------------------------------------------------------------------------------
+    def fmu_calls(self) -> int:
+        return sum(n.instance.calls for n in self.nodes)
+
+    def do_steps(self) -> dict[str, int]:
+        return {n.name: n.instance.do_steps for n in self.nodes}

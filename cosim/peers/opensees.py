@@ -1,0 +1,307 @@
+"""OpenSees as an independent peer: the same pounding scene, solved the way practice solves it.
+
+Benchmark only (``openseespy`` is an optional dependency, extra ``bench``).  The scene's
+buildings, ground motion and contacts (:class:`cosim.reference.Contact`) become an OpenSees
+model:
+
+* one 1-D node per floor with its lumped mass, ``ndm = ndf = 1``, displacements relative to
+  the ground (``UniformExcitation``, as our buildings);
+* per storey a ``zeroLength`` element with an ``Elastic`` material ``E = k_i`` whose damping
+  tangent ``eta = a1 k_i`` gives the stiffness-proportional part of Rayleigh damping
+  exactly, and per floor a ``zeroLength`` dashpot to the fixed ground node with
+  ``eta = a0 m_i`` for the mass-proportional part: ``C = a0 M + a1 K`` as in
+  :class:`~fmu_src.shear_building.ShearBuilding`, and no Rayleigh damping on the contact
+  (``zeroLength`` elements take none unless ``-doRayleigh`` is given);
+* the ground acceleration as a ``Path`` time series on the record's samples (OpenSees
+  interpolates linearly between them, as :meth:`Record.at` does);
+* per contact a ``zeroLength`` element between the two floors with
+
+  - ``JankowskiImpact(Kh, xi, mEff, gap, n)`` (P. J. Hughes, UCSD 2019): in approach
+    ``F = Kh d^n + 2 xi sqrt(Kh d^(n-1) mEff) d'``, in restitution ``Kh d^n``: our
+    ``jankowski`` law exactly with ``Kh = k``, ``xi = zeta``, ``mEff = m``;
+  - or ``Hertzdamp(Kh, xiNorm, gap, n)``: ``F = (Kh + xi d') d^n`` with
+    ``xi = xiNorm Kh / v_imp`` and ``v_imp`` latched from the strain rate of the *first
+    step that closes the gap* (not the onset): our Hertz-damp family with
+    ``xiNorm = zeta``, up to that latching error, which shrinks only linearly with ``dt``;
+    it is also not clipped at ``F >= 0``.
+
+  Both take a *negative* gap (a positive one is flipped with a warning): here ``-gap``.
+  The element deformation is ``u_right - u_left = -(delta + gap)``.
+
+Time integration: Newmark average acceleration (``gamma = 1/2, beta = 1/4``) at a fixed
+``dt``, Newton iterations on ``NormDispIncr``.  The contact materials return no damping
+tangent for their ``d'``-dependent term, so Newton is not quadratic during the approach and
+plain Newton fails at ``dt >= 5e-4 s`` on several records; each step therefore falls back
+through ``KrylovNewton``, ``NewtonLineSearch`` and ``ModifiedNewton`` and then halves the
+step (up to ``max_subdivisions`` times).  :attr:`PeerResult.algorithms` records what each
+step needed.
+
+OpenSees runs in a subprocess: the wheel's ``opensees.so`` needs ``libblas.so.3`` from the
+wheel's own ``openseespylinux/lib`` folder, which is not on the loader path (we set
+``LD_LIBRARY_PATH`` for the child and also preload the libraries with ``RTLD_GLOBAL``);
+OpenSees keeps one global domain per process; and the child's timing excludes Python start-up
+and model transfer.
+"""
+from __future__ import annotations
+
+import functools
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from fmu_src.contact_laws import LAWS, law_spec
+
+from .opensees_worker import opensees_library_dir
+from .reference import reference_for_scene, scene_inputs
+
+#: the child process's script (numpy and openseespy only)
+WORKER = Path(__file__).resolve().with_name("opensees_worker.py")
+
+MATERIALS = ("JankowskiImpact", "Hertzdamp")
+#: our contact models each OpenSees material reproduces (see module docstring): the contact law
+#: table's ``opensees`` entries
+MATERIAL_MODELS = {material: tuple(name for name, spec in LAWS.items() if spec.opensees == material)
+                   for material in MATERIALS}
+
+
+def material_for(model: str) -> str:
+    """The OpenSees material that reproduces contact law ``model`` (the table's ``opensees``);
+    ValueError for an unknown name or a law OpenSees has no equivalent of."""
+    material = law_spec(model).opensees
+    if material is None:
+        have = [name for name, spec in LAWS.items() if spec.opensees]
+        raise ValueError(f"model = {model!r} has no OpenSees equivalent; laws that have one: {', '.join(have)}")
+    return material
+
+
+# -- locating and loading openseespy ------------------------------------------------------------
+def _child_env() -> dict:
+    env = dict(os.environ)
+    lib = opensees_library_dir()
+    if lib is not None:
+        env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (str(lib), env.get("LD_LIBRARY_PATH", "")) if p)
+    return env
+
+
+@functools.lru_cache(maxsize=1)
+def opensees_available() -> bool:
+    """True if ``openseespy`` imports in a child process (checked once per process)."""
+    if importlib.util.find_spec("openseespy") is None:
+        return False
+    try:
+        proc = subprocess.run([sys.executable, "-P", str(WORKER), "--check"], env=_child_env(),
+                              capture_output=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return proc.returncode == 0
+
+
+# -- result --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PeerResult:
+    """Outcome of :func:`run_opensees` (SI units).
+
+    ``t`` holds every step (s); ``u`` the floor displacements of all buildings side by side
+    (m); ``contact_force`` (N, >= 0 compressive) and ``penetration`` (m) per contact.
+    ``dissipated_energy_J`` is the area of the contact force-penetration loops (trapezoidal
+    rule on the steps, the rule Newmark's average acceleration is consistent with), minus
+    the elastic energy still stored at the end.  ``wall_time_s`` times the analysis loop in
+    the child process; ``build_time_s`` the model definition.  ``algorithms`` counts the
+    steps each fallback algorithm settled; ``subdivided_steps`` the steps that had to be
+    halved.
+    """
+
+    material: str
+    dt: float
+    converged: bool
+    t: np.ndarray
+    u: np.ndarray
+    contact_force: np.ndarray
+    penetration: np.ndarray
+    peak_force_N: float
+    impacts: int
+    dissipated_energy_J: float
+    peak_displacements: tuple[np.ndarray, ...]
+    floor_offsets: tuple[int, ...]
+    wall_time_s: float
+    build_time_s: float
+    algorithms: dict = field(default_factory=dict)
+    subdivided_steps: int = 0
+    message: str = ""
+
+    def displacements(self, building: int) -> np.ndarray:
+        return self.u[:, self.floor_offsets[building]:self.floor_offsets[building + 1]]
+
+
+# -- model description (plain numbers, JSON) -------------------------------------------------------
+def _rayleigh(building) -> tuple[float, float]:
+    """``(a0, a1)`` with ``C = a0 M + a1 K``; refuses damping that is not of that form."""
+    M, K, C = (np.asarray(x, dtype=float) for x in (building.M, building.K, building.C))
+    if hasattr(building, "damping") and building.damping == "rayleigh":
+        a0, a1 = building.rayleigh_coefficients
+    else:   # fit and check: only Rayleigh damping maps onto element dashpots
+        A = np.column_stack((M.ravel(), K.ravel()))
+        (a0, a1), *_ = np.linalg.lstsq(A, C.ravel(), rcond=None)
+    scale = max(np.max(np.abs(C)), 1e-300)
+    if np.max(np.abs(a0 * M + a1 * K - C)) > 1e-9 * scale:
+        raise ValueError("OpenSees peer: building damping is not Rayleigh (C != a0 M + a1 K); "
+                         "use damping = 'rayleigh'")
+    return float(a0), float(a1)
+
+
+def _storey_stiffnesses(building) -> np.ndarray:
+    if hasattr(building, "stiffnesses"):
+        return np.asarray(building.stiffnesses, dtype=float)
+    K = np.asarray(building.K, dtype=float)
+    n = K.shape[0]
+    above = np.array([-K[i, i + 1] for i in range(n - 1)])
+    return np.append(K[0, 0] - (above[0] if n > 1 else 0.0), above) if n > 1 else np.array([K[0, 0]])
+
+
+def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time: float, dt: float,
+                      x0=None, v0=None, material: str = "JankowskiImpact", *, tol: float = 1e-12,
+                      max_iter: int = 25, max_subdivisions: int = 4) -> dict:
+    """The OpenSees model as plain numbers (what the child process receives)."""
+    if material not in MATERIALS:
+        raise ValueError(f"material = {material!r} is not allowed: one of {', '.join(MATERIALS)}")
+    dt, stop_time = float(dt), float(stop_time)
+    if not (math.isfinite(dt) and 0.0 < dt <= stop_time):
+        raise ValueError(f"dt = {dt!r} s must be > 0 and <= stop_time = {stop_time!r} s")
+    spec_buildings = []
+    for b, building in enumerate(buildings):
+        a0, a1 = _rayleigh(building)
+        n = len(building.masses)
+        init = []
+        for name, values in (("x0", x0), ("v0", v0)):
+            arr = np.zeros(n) if values is None or values[b] is None else np.asarray(values[b], dtype=float)
+            if arr.size != n:
+                raise ValueError(f"{name}[{b}] has {arr.size} values; building {b} has {n} floors")
+            init.append(arr.tolist())
+        spec_buildings.append(dict(mass=np.asarray(building.masses, dtype=float).tolist(),
+                                   k=_storey_stiffnesses(building).tolist(), a0=a0, a1=a1,
+                                   x0=init[0], v0=init[1]))
+    spec_ground = None
+    if ground is not None:
+        if not (hasattr(ground, "times") and hasattr(ground, "acceleration")):
+            raise TypeError("OpenSees peer: the ground motion must be a sampled Record (times, acceleration)")
+        spec_ground = dict(times=np.asarray(ground.times, dtype=float).tolist(),
+                           values=np.asarray(ground.acceleration, dtype=float).tolist())
+    spec_contacts = []
+    for c, contact in enumerate(contacts):
+        law = contact.law
+        if law.spec.opensees != material:
+            raise ValueError(f"contact {c}: OpenSees {material} reproduces the models "
+                             f"{', '.join(MATERIAL_MODELS[material])}, not {law.model!r}")
+        spec_contacts.append(dict(left=int(contact.left), left_floor=int(contact.left_floor),
+                                  right=int(contact.right), right_floor=int(contact.right_floor),
+                                  k=float(law.k), n=float(law.n), zeta=float(law.zeta), m=float(law.m),
+                                  gap=float(contact.gap)))
+    return dict(buildings=spec_buildings, ground=spec_ground, contacts=spec_contacts, stop_time=stop_time,
+                dt=dt, material=material, tol=float(tol), max_iter=int(max_iter),
+                max_subdivisions=int(max_subdivisions))
+
+
+# -- the parent side -----------------------------------------------------------------------------------
+def run_opensees(buildings: Sequence, ground, contacts: Sequence, stop_time: float, dt: float,
+                 x0=None, v0=None, material: str = "JankowskiImpact", *, tol: float = 1e-12,
+                 max_iter: int = 25, max_subdivisions: int = 4, timeout: float | None = None) -> PeerResult:
+    """Solve the scene with OpenSees (Newmark average acceleration, fixed ``dt`` in s).
+
+    Same plain inputs as :func:`cosim.peers.reference.solve_reference`.  ``tol`` (m) is the
+    ``NormDispIncr`` tolerance: far below the penetrations (1e-5-1e-3 m) so that the
+    iteration error does not mask the time-step error.  Raises ``RuntimeError`` if
+    openseespy is not usable; a step that fails every fallback ends the run with
+    ``converged = False`` and the history up to there.
+    """
+    spec = model_description(buildings, ground, contacts, stop_time, dt, x0, v0, material, tol=tol,
+                             max_iter=max_iter, max_subdivisions=max_subdivisions)
+    if opensees_library_dir() is None and importlib.util.find_spec("openseespy") is None:
+        raise RuntimeError("openseespy is not installed (pip install openseespy, extra 'bench')")
+    with tempfile.TemporaryDirectory(prefix="opensees_peer_") as tmp:
+        inp, out = Path(tmp) / "model.json", Path(tmp) / "result.npz"
+        inp.write_text(json.dumps(spec), encoding="utf-8")
+        # the worker as a script (-P: without its folder on sys.path): the child needs numpy and
+        # openseespy, not the cosim package and its fmpy imports
+        proc = subprocess.run([sys.executable, "-P", str(WORKER), "--worker", str(inp), str(out)],
+                              env=_child_env(), capture_output=True, text=True, timeout=timeout)
+        if proc.returncode != 0 or not out.exists():
+            tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-8:])
+            raise RuntimeError(f"OpenSees child process failed (exit {proc.returncode}):\n{tail}")
+        with np.load(out, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+    summary = json.loads(str(arrays.pop("summary")))
+    offsets = tuple(int(x) for x in np.concatenate(([0], np.cumsum([len(b["mass"]) for b in spec["buildings"]]))))
+    return _summarise(spec, arrays, summary, offsets)
+
+
+def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
+    t, u, F, delta = arrays["t"], arrays["u"], arrays["force"], arrays["delta"]
+    impacts = 0
+    dissipated = 0.0
+    for c, contact in enumerate(spec["contacts"]):
+        on = F[:, c] > 0.0
+        impacts += int(np.count_nonzero(on[1:] & ~on[:-1]) + (1 if on.size and on[0] else 0))
+        d = np.maximum(delta[:, c], 0.0)
+        loop = float(np.sum(0.5 * (F[1:, c] + F[:-1, c]) * np.diff(d)))
+        stored = contact["k"] * d[-1] ** (contact["n"] + 1.0) / (contact["n"] + 1.0) if on.size and on[-1] else 0.0
+        dissipated += loop - stored
+    peak_u = np.max(np.abs(u), axis=0) if u.size else np.zeros(offsets[-1])
+    return PeerResult(
+        material=spec["material"], dt=spec["dt"], converged=bool(summary["converged"]), t=t, u=u,
+        contact_force=F, penetration=delta, peak_force_N=float(np.max(F)) if F.size else 0.0,
+        impacts=impacts, dissipated_energy_J=dissipated,
+        peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(offsets[:-1], offsets[1:])),
+        floor_offsets=offsets, wall_time_s=float(summary["wall_time_s"]),
+        build_time_s=float(summary["build_time_s"]), algorithms=summary["algorithms"],
+        subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"])
+
+
+def opensees_for_scene(scene, dt: float, material: str | None = None, overrides: dict | None = None,
+                       **options) -> PeerResult:
+    """:func:`run_opensees` on a :class:`cosim.master.scene.Scene` (inputs as the reference builds them);
+    ``material`` default: the one of the scene's contact law (:func:`material_for`)."""
+    inputs = scene_inputs(scene)
+    inputs.update(overrides or {})
+    if material is None:
+        materials = {material_for(c.law.model) for c in inputs["contacts"]} or {MATERIALS[0]}
+        if len(materials) > 1:
+            raise ValueError(f"the scene's contacts need several OpenSees materials {sorted(materials)}: give one")
+        material = materials.pop()
+    return run_opensees(inputs["buildings"], inputs["ground"], inputs["contacts"], inputs["stop_time"], dt,
+                        inputs.get("x0"), inputs.get("v0"), material, **options)
+
+
+# -- the child side ----------------------------------------------------------------------------------
+
+
+def compare(scene, dts: Sequence[float] = (1e-3, 5e-4, 2e-4, 1e-4), material: str = "JankowskiImpact",
+            overrides: dict | None = None) -> str:
+    """Table of OpenSees at several ``dt`` against the reference solver on one scene (benchmark;
+    ``pounding-cosim opensees SCENE --dt ...``)."""
+    ref = reference_for_scene(scene, {"output_dt": 0.01, **(overrides or {})})
+    lines = [f"scene {scene.name}: reference ({ref.method}, rtol {ref.rtol:g}) impacts {ref.impacts}, "
+             f"peak force {ref.peak_force_N:.5e} N, dissipated {ref.dissipated_energy_J:.6g} J, "
+             f"wall {ref.wall_time_s:.2f} s, nfev {ref.nfev}",
+             f"{'dt (s)':>8} {'impacts':>7} {'d peak F':>9} {'d E_diss':>9} {'d peak u':>9} {'wall (s)':>8}  algorithms"]
+    for dt in dts:
+        peer = opensees_for_scene(scene, dt, material, overrides)
+        du = max(float(np.max(np.abs(p / np.where(r > 0, r, 1.0) - 1.0)))
+                 for p, r in zip(peer.peak_displacements, ref.peak_displacements))
+        note = ", ".join(f"{k} {v}" for k, v in peer.algorithms.items())
+        if peer.subdivided_steps:
+            note += f", {peer.subdivided_steps} halved"
+        if not peer.converged:
+            note += f"; FAILED: {peer.message}"
+        lines.append(f"{dt:8.1e} {peer.impacts:7d} {peer.peak_force_N / ref.peak_force_N - 1:+9.2%} "
+                     f"{peer.dissipated_energy_J / ref.dissipated_energy_J - 1:+9.2%} {du:9.3%} "
+                     f"{peer.wall_time_s:8.2f}  {note}")
+    return "\n".join(lines)

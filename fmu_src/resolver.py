@@ -1,0 +1,663 @@
+"""The in-step impact resolver of ``pounding.fmu``: impacts located and integrated inside a step.
+
+:class:`ImpactResolver` is a pure Python Dormand-Prince 5(4) integrator of the relative
+motion in the impact's own scales, with located events (onset, maximum penetration,
+re-approach, separation); :class:`StepOutcome` is what one communication step hands back.
+The force of each branch is the contact law table's scaled kernel
+(:meth:`fmu_src.contact_laws.LawSpec.kernel`); the separation rule is the table's too
+(:meth:`~fmu_src.contact_laws.LawSpec.separation_function`).  Pure physics (SI units, no FMI).
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+from scipy.optimize import brentq, minimize_scalar
+
+from .contact_laws import MIN_IMPACT_SPEED, ContactLaw
+from .host_observer import HostObserver
+
+# Dormand-Prince 5(4) tableau (Dormand & Prince 1980; as in scipy's RK45).
+_C2, _C3, _C4, _C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
+_A21 = 1 / 5
+_A31, _A32 = 3 / 40, 9 / 40
+_A41, _A42, _A43 = 44 / 45, -56 / 15, 32 / 9
+_A51, _A52, _A53, _A54 = 19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729
+_A61, _A62, _A63, _A64, _A65 = 9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656
+_B1, _B3, _B4, _B5, _B6 = 35 / 384, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84
+_E1, _E3, _E4, _E5, _E6, _E7 = 71 / 57600, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40
+
+#: scaled rate above which a restitution branch turns back into approach (the structure pushes the
+#: bodies together again before they separate); a small positive threshold so that the event
+#: cannot fire at the very point where the approach branch ended.
+_REAPPROACH_RATE = 1e-9
+#: guard against an endless impact/flight alternation inside one step (never reached in tests)
+_MAX_IMPACTS_PER_STEP = 1000
+#: branch switches (maximum penetration / re-approach) per step after which re-approach is no
+#: longer detected in that step: a guard against chatter at delta_dot = 0 (a crvk contact held
+#: between its branches sticks instead, ImpactResolver._stick; never reached in the tests)
+_MAX_SWITCHES_PER_STEP = 200
+#: energy the hand-over's timing may have given the host before it is taken back, as a part of
+#: the impact's kinetic energy m v_imp^2 (rule 7)
+_DEBT_TOLERANCE = 1e-4
+
+
+@dataclass
+class StepOutcome:
+    """What one :meth:`ImpactResolver.step` hands back (SI units)."""
+
+    impulse: float = 0.0          # N s over the step
+    mean_force: float = 0.0       # N, impulse / h
+    peak_force: float = 0.0       # N, largest instantaneous force in the step
+    substeps: int = 0             # accepted internal integration steps
+    nfev: int = 0                 # force evaluations
+    impacts_started: int = 0
+    impacts_completed: int = 0
+
+
+class ImpactResolver:
+    """Locate and integrate impacts inside a communication step, at the impact's own time scale.
+
+    The host supplies ``delta`` [m] and ``delta_dot`` [m/s] at the start of each step and applies
+    the returned mean force over the step.  Inside the step the relative motion obeys
+    ``delta_ddot = a_ext(s) - F / m``: the contact force on the effective mass plus the
+    *external* relative acceleration ``a_ext`` of the structures the bodies belong to (storey
+    springs and dampers; zero for free masses).  Rules (docs/contact_models.md, "in-step rules"):
+
+    1. *Following the host* (:class:`HostObserver`).  ``a_ext`` is learnt from the host's
+       velocity increments only, once our own force is taken out of them with the host's
+       identified delivery kernel (or when none of our force can be in them), and extrapolated
+       linearly over the next step.  Position increments, which depend on the host's
+       integrator, are never learnt from.
+    2. *Whose state.*  Out of contact, once every impulse handed over has reached the host, the
+       host's state is the truth (rule 4 for a residual overlap).  Through a contact and until
+       its impulse has reached the host, the resolver's own state is: it is corrected only by
+       the difference between the clean structural increment and the one assumed.  For free
+       masses that difference is zero whatever the host integrator, so an impact of free
+       masses is exact at any step.
+    3. *Onset*: out of contact, a new impact starts where the prediction
+       ``delta_eff + delta_dot s + int int a_ext`` crosses zero while approaching.
+       A step that starts overlapping (a crossing the prediction missed) moves the overlap
+       into ``offset``; the impact starts at once if the bodies approach.
+    4. *During contact* the impact is integrated (Dormand-Prince 5(4), scaled by
+       ``L = (m v^2/k)^(1/(n+1))`` and ``T = L / v``) with located events at maximum
+       penetration (``delta_dot = 0``), re-approach (``delta_dot`` rising again while loaded,
+       the structure pushing back: same impact), stick (a push between the two branches of a
+       law whose force drops at ``delta_dot = 0``: held, :meth:`_stick`) and separation (``delta = 0``, or the raw
+       force reaching zero for laws with a dashpot in restitution); it may straddle any number
+       of steps, and several impacts may occur in one step.
+    5. *After separation* the host, moved by a held mean force, may still overlap while
+       separating.  Such an apparent overlap is kept as ``offset`` (>= 0, cleared once the
+       host's ``delta <= 0``); a force separation with ``delta > 0`` moves the remaining
+       overlap into the offset as well.
+    6. *Impulse and energy*: the impulse is ``int F dt`` of the internal force history,
+       ``mean_force = impulse / h``.  ``E_dissipated`` is the work of the dissipative part of the
+       force, ``int (F - k delta^n) delta_dot dt`` >= 0, integrated along the internal trajectory
+       (plus, at a force separation, the elastic energy left in the overlap): it never decreases,
+       and it does not depend on how the host holds the force, so the host's energy balance
+       shows the coupling error instead of hiding it.
+    7. *Hand-over* (:meth:`_hand_over`): a host that delivers our force ``lead`` steps late on
+       average (the kernel's mean delay) gets the impulse that much early, so that it acts on
+       the host's structures when it acts on the resolver's own bodies; momentum is exact over
+       an episode (``ahead``).  The energy a late hand-over gave the host (``int C A dt``,
+       :meth:`HostObserver._book_timing`) is taken back by shifting the next hand-over.
+
+    ``follow_host=False`` restores the free-mass model (``a_ext = 0``, no corrections).
+    The instance holds only plain numbers, so ``copy.deepcopy`` saves its state.
+    """
+
+    def __init__(self, law: ContactLaw, rtol: float = 1e-8, follow_host: bool = True,
+                 extrapolate: bool = True, host: str = "any"):
+        self.law = law
+        self.rtol = rtol
+        self.follow_host = follow_host
+        self.observer = HostObserver(law.m, extrapolate, host)
+        spec = law.spec   # the law's entry of the contact law table: kernels and separation rule
+        self._kernels = {True: spec.kernel(law.zeta, law.n, True), False: spec.kernel(law.zeta, law.n, False)}
+        # restitution ends at d = 0 or, for a law whose raw force can reach 0 first, there; the
+        # Hertz-damp factor 1 + zeta u only while an external force pulls (used with al < 0)
+        self._separations = (spec.separation_function(law.zeta, law.n),
+                             spec.separation_function(law.zeta, law.n, pulled=True))
+        self._separation = self._separations[0]
+        self._sticks = spec.sticks and law.zeta > 0.0   # a push between the branches holds it (rule 4)
+        self.in_contact = False
+        self.approaching = False
+        self.sticking = False       # held at delta_dot = 0 between the law's two branches (rule 4)
+        self.v_imp = 0.0            # latched approach speed of the latest impact, m/s
+        self.d = 0.0                # internal scaled penetration (in contact)
+        self.u = 0.0                # internal scaled rate (in contact)
+        self.e = 0.0                # scaled energy dissipated by the current impact (unit m v_imp^2)
+        self.e_top = 0.0            # largest e - margin so far (reported while in contact: never decreases)
+        self.offset = 0.0           # m, apparent overlap left by a resolved impact
+        self.delta_end = 0.0        # m, internal penetration at the end of the last step
+        self.delta_dot_end = 0.0    # m/s
+        self.started = False        # a step has been taken
+        self.ahead = 0.0            # N s, impulse handed over ahead of the internal trajectory (rule 7)
+        self.just_separated = False
+        self.dtau = 1e-3            # next internal step, scaled
+        self.a0 = 0.0               # m/s^2, external relative acceleration at the step start
+        self.a1 = 0.0               # m/s^3, its rate over the step
+        self.correction = (0.0, 0.0)  # (m, m/s) last correction applied to the internal state
+        self.impacts = 0
+        self.E_completed = 0.0      # J, all completed impacts
+        self.F_max = 0.0            # N
+        self.impact_peak = 0.0      # N, current/latest impact
+        self.impact_time = 0.0      # s, elapsed contact time of current/latest impact
+        self.delta_max = 0.0        # m, current/latest impact
+        self.last_CR = math.nan     # achieved CR of the latest completed impact
+        self.last_E = 0.0           # J dissipated by the latest completed impact
+        self._prev = ()             # last two force samples for peak interpolation
+        self._sep = (0.0, 0.0)      # (m, m/s) state at the latest separation, shifted to delta <= 0
+
+    # -- derived outputs -------------------------------------------------------------------
+    def _scales(self):
+        v = self.v_imp
+        L = self.law.length_scale(v)
+        return v, L, L / v, self.law.m * v * v / L
+
+    def dissipated_energy(self) -> float:
+        """Energy dissipated by all impacts so far, the current one up to now [J]; never decreases."""
+        if not self.in_contact:
+            return self.E_completed
+        # same floating-point expression as in _finish: the total cannot drop by a rounding
+        return self.E_completed + self.law.m * self.v_imp * self.v_imp * self.e_top
+
+    # -- external acceleration -------------------------------------------------------------
+    def _ext_rate(self, t: float, r: float) -> float:
+        """Rate change [m/s] from the external acceleration over [t, t + r] of the step."""
+        return self.a0 * r + self.a1 * (t * r + 0.5 * r * r)
+
+    def _ext_position(self, t: float, r: float) -> float:
+        """Position change [m] from the external acceleration over [t, t + r], from rest."""
+        return 0.5 * self.a0 * r * r + self.a1 * (0.5 * t * r * r + r * r * r / 6.0)
+
+    def _follow(self, delta: float, delta_dot: float, h: float) -> None:
+        """Rule 1-2: learn the structures' motion, correct the resolver's own state by the
+        difference between the clean structural increment and the one assumed."""
+        if not self.follow_host:
+            self.a0 = self.a1 = 0.0
+            return
+        cx, cu = (float(c) for c in self.observer.observe(delta, delta_dot, h))
+        self.a0, self.a1 = float(self.observer.a0), float(self.observer.a1)
+        self.correction = (cx, cu)
+        if cx == 0.0 and cu == 0.0:
+            return
+        if self.in_contact:
+            v, L = self.v_imp, self.law.length_scale(self.v_imp)
+            self.d += cx / L
+            self.u += cu / v
+        self.delta_end += cx
+        self.delta_dot_end += cu
+
+    # -- one communication step ------------------------------------------------------------
+    def step(self, delta: float, delta_dot: float, h: float) -> StepOutcome:
+        """Advance over ``h`` [s] from the host's ``delta`` [m], ``delta_dot`` [m/s] at the step start."""
+        if not (h > 0.0 and math.isfinite(h)):
+            raise ValueError(f"communication step h = {h!r} s is outside the allowed range h > 0")
+        out = StepOutcome()
+        delta, delta_dot = float(delta), float(delta_dot)
+        self._follow(delta, delta_dot, h)
+        d0, v0 = (0.0, 0.0) if self.in_contact else self._flight_start(delta, delta_dot)
+        self._advance(0.0, h, d0, v0, out)
+        # the force law is compressive; a quadrature of a force that fades to zero at
+        # separation can sum to -1e-29 N s, which must not reach the host as tension
+        internal = max(out.impulse, 0.0)
+        lead = self.observer.lead if self.follow_host else 0.0
+        if lead > 0.0 or self.ahead != 0.0 or (self.follow_host and self.observer.debt > 0.0):
+            out.impulse, internal = self._hand_over(internal, lead, h)
+        else:
+            out.impulse = internal
+        out.mean_force = out.impulse / h
+        if self.follow_host:
+            self.observer.record(out.mean_force, h, internal)
+        self.started = True
+        return out
+
+    def _probe(self, h: float, span: float) -> float:
+        """Impulse [N s] the resolver's own bodies will receive over ``span`` s after this step."""
+        probe = copy.copy(self)
+        out = StepOutcome()
+        probe._advance(h, h + span, probe.delta_end, probe.delta_dot_end, out)
+        return max(out.impulse, 0.0)
+
+    def _hand_over(self, internal: float, lead: float, h: float) -> tuple[float, float]:
+        """Rule 7: the impulse [N s] to hand over this step, and the internal one to book.
+
+        The host delivers our force ``lead`` steps late on average: hand it over that much
+        early, so that it reaches the host's structures when it acts on the resolver's own
+        bodies (``ahead`` keeps the difference; momentum is exact over an episode).  While the
+        timing has given the host energy (the host's kernel was not yet known), hand over
+        early or late by the step that takes it back: ``int C A dt`` (HostObserver._book_timing)
+        changes by ``dJ A h`` when ``dJ`` is handed over one step early.
+        """
+        target = self._probe(h, lead * h) if lead > 0.0 else 0.0
+        debt = self.observer.debt
+        a_next = self.a0 + self.a1 * h
+        if debt > _DEBT_TOLERANCE * self.law.m * self.v_imp * self.v_imp and a_next != 0.0 \
+                and (self.in_contact or target > 0.0):
+            shift = -debt / (a_next * h)
+            if shift > 0.0:                       # early: at most the next step's impulse
+                shift = min(shift, self._probe(h, (lead + 1.0) * h) - target)
+            target += shift
+        emitted = max(internal + target - self.ahead, 0.0)
+        self.ahead += emitted - internal
+        if not self.in_contact and target <= 0.0 and self.ahead > 0.0:
+            # handed over for an impact the resolver's own motion did not make after all:
+            # the host has it, so the bodies have it (momentum)
+            self.delta_dot_end -= self.ahead / self.law.m
+            internal += self.ahead
+            self.ahead = 0.0
+        return emitted, internal
+
+    def _advance(self, t: float, t_end: float, d0: float, v0: float, out: StepOutcome) -> None:
+        """Flight and impacts from ``t`` to ``t_end`` [s] into the step (d0, v0: flight state at t)."""
+        for _ in range(_MAX_IMPACTS_PER_STEP):
+            if self.in_contact:
+                t = self._integrate(t, t_end, out)
+                if self.in_contact:
+                    return
+                d0, v0 = self._sep
+            s = self._onset(d0, v0, t, t_end - t)
+            if s is None:
+                r = t_end - t
+                self.delta_end = d0 + v0 * r + self._ext_position(t, r)
+                self.delta_dot_end = v0 + self._ext_rate(t, r)
+                return
+            v_on = v0 + self._ext_rate(t, s)
+            t += s
+            self._start(v_on)
+            out.impacts_started += 1
+
+    def _flight_start(self, delta: float, delta_dot: float):
+        """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 5)."""
+        if self.follow_host and self.started and self.observer.pending():
+            # part of an impulse is still on its way to the host: the resolver's own flight
+            d0, v0 = self.delta_end, self.delta_dot_end
+            self.offset = max(0.0, delta - d0) if delta > 0.0 else 0.0
+            if d0 > 0.0:
+                self.offset, d0 = self.offset + d0, 0.0
+            return d0, v0
+        if self.follow_host and self.started:
+            inner = self.delta_end               # internal flight, predicted over the last step
+        else:
+            inner = self.delta_end if self.just_separated else delta - self.offset
+        self.just_separated = False
+        v0 = delta_dot
+        offset = delta - inner
+        if delta <= 0.0 or offset < 0.0:         # host open, or the host is behind the internal state
+            offset = 0.0
+        d0 = delta - offset
+        if d0 > 0.0:                             # overlap the prediction missed: into the offset
+            offset += d0
+            d0 = 0.0
+        self.offset = offset
+        return d0, v0
+
+    def _onset(self, d0: float, v0: float, t: float, r: float):
+        """First time in (0, r] [s] at which the flight ``d0 + v0 s + ext`` crosses 0 upward, or None."""
+        if not r > 0.0:
+            return None
+        a0, a1 = self.a0 + self.a1 * t, self.a1
+
+        def g(s):
+            return d0 + v0 * s + 0.5 * a0 * s * s + a1 * s * s * s / 6.0
+
+        # monotone pieces between the zeros of g' = v0 + a0 s + a1 s^2 / 2
+        cuts = [0.0, r]
+        if a1 != 0.0:
+            disc = a0 * a0 - 2.0 * a1 * v0
+            if disc >= 0.0:
+                q = math.sqrt(disc)
+                cuts += [(-a0 + q) / a1, (-a0 - q) / a1]
+        elif a0 != 0.0:
+            cuts.append(-v0 / a0)
+        cuts = sorted(c for c in cuts if 0.0 <= c <= r)
+        g_lo = d0
+        for lo, hi in zip(cuts[:-1], cuts[1:]):
+            g_hi = g(hi)
+            if g_lo <= 0.0 < g_hi:
+                if g_lo == 0.0:
+                    return lo
+                return brentq(g, lo, hi, xtol=1e-15 * r, rtol=1e-15)
+            g_lo = g_hi
+        return None
+
+    def _start(self, v: float) -> None:
+        self.in_contact = True
+        self.approaching = True
+        self.sticking = False
+        self.v_imp = max(v, MIN_IMPACT_SPEED)
+        self.d, self.u, self.e, self.e_top = 0.0, 1.0, 0.0, 0.0
+        self.impacts += 1
+        self.impact_peak = 0.0
+        self.impact_time = 0.0
+        self.delta_max = 0.0
+        self._prev = ()
+        self.dtau = 1e-3
+
+    def _finish(self, d: float, u: float, L: float, v: float) -> None:
+        """Book a completed impact that separated at scaled (d, u)."""
+        n, m = self.law.n, self.law.m
+        # a force separation with d > 0 leaves the spring energy of the overlap behind: lost
+        e = max(self.e_top, self.e) + (d ** (n + 1.0) / (n + 1.0) if d > 0.0 else 0.0)
+        self.in_contact = False
+        self.just_separated = True
+        self.last_CR = max(0.0, -u)
+        self.last_E = m * self.v_imp * self.v_imp * e
+        self.E_completed += self.last_E
+        self._sep = (min(d, 0.0) * L, u * v)   # the overlap at a force separation goes to the offset
+
+    def _integrate(self, t: float, h: float, out: StepOutcome) -> float:
+        """Integrate the current impact from ``t`` [s] into the step; returns the time reached."""
+        v, L, T, F0 = self._scales()
+        m = self.law.m
+        # external acceleration in scaled units: alpha(tau) = al0 + al1 tau from time t
+        al0 = (self.a0 + self.a1 * t) * T / v
+        al1 = self.a1 * T * T / v
+        tau = 0.0
+        tau_end = (h - t) / T
+        # 1e-10: a pull below 1e-10 of the impact's force scale cannot clip the force before
+        # round-off in 1 + zeta u does (LawSpec.separation_function, pulled)
+        self._separation = self._separations[1 if min(al0, al0 + al1 * tau_end) < -1e-10 else 0]
+        u_ref = self.u                            # impulse = m (ext rate change - internal rate change)
+        d, u = self.d, self.u
+        # branch consistent with the (possibly corrected) state
+        if self.sticking:
+            u = 0.0                               # held: a correction of the rate goes into the force
+        elif self.approaching and u <= 0.0:
+            self._switch_to_restitution(d, u, L)
+        elif not self.approaching and u > _REAPPROACH_RATE:
+            self.approaching = True
+        f = self._kernels[self.approaching]
+        if not self.approaching and self._separation(d, u) <= 0.0:
+            self._finish(d, u, L, v)
+            out.impacts_completed += 1
+            return t
+        fs, p = f(d, u)
+        acc = al0 - fs
+        nfev = 1
+        base = self.impact_time / T               # scaled contact time at the step start
+        if not self._prev:
+            nfev += self._sample(base, fs, d, u, acc, al0, al1, self.approaching, out, F0)
+        atol = rtol = self.rtol
+        dtau = self.dtau
+        e, e_top = self.e, self.e_top
+        # the identity drifts by the integration error (~rtol) where the true power is 0: the
+        # reported value trails it by this margin, so that booking the completed impact's own
+        # value (exact for free masses) never lowers the total
+        margin = 10.0 * self.rtol
+        separated = False
+        switches = 0
+        while tau < tau_end * (1.0 - 1e-15):
+            if self.sticking:
+                tau = self._stick(d, al0, al1, tau, tau_end, base, out, F0)
+                if self.sticking:
+                    break
+                f = self._kernels[self.approaching]
+                fs, p = f(d, 0.0)
+                acc = al0 + al1 * tau - fs
+                continue
+            hs = min(dtau, tau_end - tau)
+            last = hs >= tau_end - tau
+            al_t = al0 + al1 * tau
+            d1, u1, acc1, f1, p1, de, err = self._dp_step(f, al_t, al1, d, u, acc, p, hs, atol, rtol)
+            nfev += 6
+            if err > 1.0:
+                dtau = hs * max(0.2, 0.9 * err ** -0.2)
+                continue
+            out.substeps += 1
+            event = None
+            if self.approaching:
+                if u1 <= 0.0:
+                    event = "max_penetration"
+            else:
+                if self._separation(d1, u1) <= 0.0:
+                    event = "separation"
+                if u1 > _REAPPROACH_RATE and switches < _MAX_SWITCHES_PER_STEP:
+                    event = "reapproach" if event is None else self._first_event(
+                        f, al_t, al1, d, u, acc, p, hs, atol, rtol)
+            if event is not None:
+                switches += 1
+                g = self._event_function(event)
+                hs, d1, u1, _, _, _, _, n_ev = self._locate(f, al_t, al1, d, u, acc, p, hs, g, atol, rtol)
+                nfev += n_ev
+                tau += hs
+                e += self._dissipated(d, u, d1, u1, al_t, al1, hs)
+                e_top = e - margin if e - margin > e_top else e_top
+                d, u = d1, u1
+                if event == "separation":
+                    separated = True
+                    break
+                self.e, self.e_top = e, e_top
+                if event == "max_penetration":
+                    u = 0.0
+                    f_end = f(d, 0.0)[0]
+                    nfev += self._sample(base + tau, f_end, d, u, al0 + al1 * tau - f_end, al0 + al1 * tau, al1,
+                                         True, out, F0, branch_end=True)
+                    self._switch_to_restitution(d, u, L)
+                    self.sticking = self._holds(d, al0 + al1 * tau)
+                else:                                     # re-approach: the dashpot acts again ...
+                    self.approaching = True
+                    if self._holds(d, al0 + al1 * tau):   # ... unless its force would push back at once
+                        self.approaching, self.sticking, u = False, True, 0.0
+                if self.sticking:
+                    continue
+                f = self._kernels[self.approaching]
+                fs, p = f(d, u)
+                acc = al0 + al1 * tau - fs
+                nfev += 1 + self._sample(base + tau, fs, d, u, acc, al0 + al1 * tau, al1, self.approaching,
+                                         out, F0)
+                dtau = hs if hs > 0.0 else dtau
+                continue
+            tau += hs
+            e += self._dissipated(d, u, d1, u1, al_t, al1, hs)
+            e_top = e - margin if e - margin > e_top else e_top
+            d, u, acc, p = d1, u1, acc1, p1
+            nfev += self._sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0)
+            if not last:
+                dtau = hs * min(5.0, 0.9 * max(err, 1e-10) ** -0.2)
+        self.dtau = dtau
+        t_used = tau * T
+        self.impact_time += t_used
+        # impulse = m * (change of rate due to the external acceleration - change of the rate)
+        out.impulse += m * (v * (u_ref - u) + self._ext_rate(t, t_used))
+        out.nfev += nfev
+        self.d, self.u, self.e, self.e_top = d, u, e, e_top
+        if separated:
+            self._finish(d, u, L, v)
+            out.impacts_completed += 1
+            return t + t_used
+        self.delta_end = d * L
+        self.delta_dot_end = u * v
+        self.delta_max = max(self.delta_max, d * L)
+        return h
+
+    def _holds(self, d: float, alpha: float) -> bool:
+        """True if the contact sticks at scaled penetration ``d`` under the scaled external
+        acceleration ``alpha``: pushed together harder than the restitution branch holds at zero
+        rate, less than the approach branch does (crvk's force drop).  Neither branch is then
+        consistent; the solution is Filippov's sliding motion, as in cosim/peers/reference.py.
+        Only a law that :attr:`~.contact_laws.LawSpec.sticks` (for the others the two forces
+        are equal at zero rate, and the band is empty)."""
+        if not self._sticks:
+            return False
+        f_approach = self._kernels[True](d, 0.0)[0]
+        f_restitution = self._kernels[False](d, 0.0)[0]
+        return f_restitution < alpha < f_approach
+
+    def _stick(self, d, al0, al1, tau, tau_end, base, out, F0) -> float:
+        """Hold the penetration from ``tau`` while ``alpha(s) = al0 + al1 s`` stays between the
+        branches' forces at ``d``; returns where it leaves (into approach above the upper one,
+        restitution below the lower one) or ``tau_end``.  The force is ``alpha``: no work, no
+        dissipation; the impulse is the external rate change (_integrate's bookkeeping)."""
+        upper = self._kernels[True](d, 0.0)[0]
+        lower = self._kernels[False](d, 0.0)[0]
+        end = tau_end
+        if al1 > 0.0:
+            end = min(end, (upper - al0) / al1)
+        elif al1 < 0.0:
+            end = min(end, (lower - al0) / al1)
+        end = max(end, tau)
+        for s in (tau, end):                      # the force is linear in time: peaks at the ends
+            F = (al0 + al1 * s) * F0
+            out.peak_force = max(out.peak_force, F)
+            self.impact_peak = max(self.impact_peak, F)
+            self.F_max = max(self.F_max, F)
+        if end < tau_end:
+            self.sticking = False
+            self.approaching = al1 > 0.0
+        self._prev = ()
+        return end
+
+    def _dissipated(self, d, u, d1, u1, al, al1, hs) -> float:
+        """Scaled energy dissipated over one internal step from (d, u) to (d1, u1), length ``hs``.
+
+        Energy identity of ``u' = alpha - f``: ``int f u = int alpha u - [u^2 / 2]``, minus the
+        energy stored in the spring, ``[d^(n+1) / (n+1)]``.  With ``alpha = al + al1 s``,
+        ``int alpha u = [alpha d] - al1 int d`` (``int d`` by the Hermite rule, exact to h^5).
+        For free masses (alpha = 0) the sum over an impact telescopes to
+        ``(1 - u_out^2) / 2``: the kinetic energy the host loses, to round-off.
+        """
+        n1 = self.law.n + 1.0
+        s0 = d ** n1 / n1 if d > 0.0 else 0.0
+        s1 = d1 ** n1 / n1 if d1 > 0.0 else 0.0
+        work = 0.0
+        if al != 0.0 or al1 != 0.0:
+            work = (al + al1 * hs) * d1 - al * d - al1 * hs * (0.5 * (d + d1) + hs * (u - u1) / 12.0)
+        return 0.5 * (u * u - u1 * u1) + (s0 - s1) + work
+
+    def _switch_to_restitution(self, d: float, u: float, L: float) -> None:
+        self.approaching = False
+        self.delta_max = max(self.delta_max, d * L)
+
+    def _event_function(self, event: str):
+        if event == "max_penetration":
+            return lambda dd, uu: uu
+        if event == "reapproach":
+            return lambda dd, uu: _REAPPROACH_RATE - uu
+        return self._separation
+
+    def _first_event(self, f, al_t, al1, d, u, acc, p, hs, atol, rtol) -> str:
+        """Separation and re-approach both inside one step: the one located first."""
+        t_sep = self._locate(f, al_t, al1, d, u, acc, p, hs, self._separation, atol, rtol)[0]
+        t_re = self._locate(f, al_t, al1, d, u, acc, p, hs, self._event_function("reapproach"), atol, rtol)[0]
+        return "separation" if t_sep <= t_re else "reapproach"
+
+    def _sample(self, tau, fs, d, u, acc, al, al1, approaching, out, F0, branch_end=False) -> int:
+        """Track the peak force at an accepted point; returns the force evaluations spent.
+
+        A sampled local maximum (or a rise into the end of the approach branch) is refined
+        by maximising the force along one Dormand-Prince step from the earlier sample
+        (bounded Brent search), so the peak does not depend on where samples fall.
+        """
+        peak = fs
+        nfev = 0
+        prev = self._prev
+        sample = (tau, fs, d, u, acc, approaching, al, al1)
+        same = [p for p in prev if p[5] == approaching]
+        if len(same) == 2 and same[1][1] >= same[0][1] and same[1][1] >= fs:
+            p, n_ev = self._refine_peak(same[0], tau - same[0][0])
+            peak, nfev = max(peak, same[1][1], p), nfev + n_ev
+        if branch_end and same and fs >= same[-1][1]:
+            p, n_ev = self._refine_peak(same[-1], tau - same[-1][0])
+            peak, nfev = max(peak, p), nfev + n_ev
+        self._prev = (prev + (sample,))[-2:]
+        F = peak * F0
+        if F > out.peak_force:
+            out.peak_force = F
+        if F > self.impact_peak:
+            self.impact_peak = F
+        if F > self.F_max:
+            self.F_max = F
+        return nfev
+
+    def _refine_peak(self, sample, span):
+        """Largest scaled force along a DP step of length in (0, span] from ``sample``."""
+        _, f0, d, u, acc, approaching, al, al1 = sample
+        if not span > 0.0:
+            return f0, 0
+        f = self._kernels[approaching]
+        rtol = self.rtol
+
+        def minus_force(x):
+            dx, ux = self._dp_step(f, al, al1, d, u, acc, 0.0, x, rtol, rtol)[:2]
+            return -f(dx, ux)[0]
+
+        res = minimize_scalar(minus_force, bounds=(0.0, span), method="bounded",
+                              options={"xatol": 1e-7 * span})
+        return -res.fun, 6 * res.nfev
+
+    @staticmethod
+    def _dp_step(f, al, al1, d, u, a1, p1, hs, atol, rtol):
+        """One Dormand-Prince step of ``d' = u, u' = al + al1 s - f(d, u)`` with the dissipated
+        energy ``e' = power``; returns (d, u, u', force, power, e increment, error norm)."""
+        # stage states (d_i, u_i) and derivatives (u_i, a_i); p_i dissipative power
+        d2 = d + hs * _A21 * u
+        u2 = u + hs * _A21 * a1
+        f2, _ = f(d2, u2)
+        a2 = al + al1 * _C2 * hs - f2
+        d3 = d + hs * (_A31 * u + _A32 * u2)
+        u3 = u + hs * (_A31 * a1 + _A32 * a2)
+        f3, p3 = f(d3, u3)
+        a3 = al + al1 * _C3 * hs - f3
+        d4 = d + hs * (_A41 * u + _A42 * u2 + _A43 * u3)
+        u4 = u + hs * (_A41 * a1 + _A42 * a2 + _A43 * a3)
+        f4, p4 = f(d4, u4)
+        a4 = al + al1 * _C4 * hs - f4
+        d5 = d + hs * (_A51 * u + _A52 * u2 + _A53 * u3 + _A54 * u4)
+        u5 = u + hs * (_A51 * a1 + _A52 * a2 + _A53 * a3 + _A54 * a4)
+        f5, p5 = f(d5, u5)
+        a5 = al + al1 * _C5 * hs - f5
+        d6 = d + hs * (_A61 * u + _A62 * u2 + _A63 * u3 + _A64 * u4 + _A65 * u5)
+        u6 = u + hs * (_A61 * a1 + _A62 * a2 + _A63 * a3 + _A64 * a4 + _A65 * a5)
+        f6, p6 = f(d6, u6)
+        a6 = al + al1 * hs - f6
+        dn = d + hs * (_B1 * u + _B3 * u3 + _B4 * u4 + _B5 * u5 + _B6 * u6)
+        un = u + hs * (_B1 * a1 + _B3 * a3 + _B4 * a4 + _B5 * a5 + _B6 * a6)
+        fn, pn = f(dn, un)
+        an = al + al1 * hs - fn
+        de = hs * (_B1 * p1 + _B3 * p3 + _B4 * p4 + _B5 * p5 + _B6 * p6)
+        ed = hs * (_E1 * u + _E3 * u3 + _E4 * u4 + _E5 * u5 + _E6 * u6 + _E7 * un)
+        eu = hs * (_E1 * a1 + _E3 * a3 + _E4 * a4 + _E5 * a5 + _E6 * a6 + _E7 * an)
+        sd = atol + rtol * max(abs(d), abs(dn))
+        su = atol + rtol * max(abs(u), abs(un))
+        err = max(abs(ed) / sd, abs(eu) / su)
+        return dn, un, an, fn, pn, de, err
+
+    def _locate(self, f, al, al1, d, u, acc, p, hs, g, atol, rtol):
+        """Step length in (0, hs] where ``g`` of the DP step's end state reaches 0 (Illinois).
+
+        Returns (length, d, u, u', force, power, e increment, force evaluations).
+        """
+        a, ga = 0.0, g(d, u)
+        b = hs
+        best = self._dp_step(f, al, al1, d, u, acc, p, b, atol, rtol)
+        gb = g(best[0], best[1])
+        best = (b,) + best[:6]
+        nfev = 6
+        side = 0
+        for _ in range(60):
+            if gb == 0.0 or (b - a) <= 1e-14 * max(hs, 1e-300):
+                break
+            c = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
+            if not (a < c < b):
+                c = 0.5 * (a + b)
+            step = self._dp_step(f, al, al1, d, u, acc, p, c, atol, rtol)
+            nfev += 6
+            gc = g(step[0], step[1])
+            if gc > 0.0:
+                a, ga = c, gc
+                if side == -1:
+                    gb *= 0.5
+                side = -1
+            else:
+                b, gb = c, gc
+                best = (c,) + step[:6]
+                if side == 1:
+                    ga *= 0.5
+                side = 1
+            if abs(gc) < 1e-15:
+                best = (c,) + step[:6]
+                break
+        return best + (nfev,)
