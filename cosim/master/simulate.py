@@ -68,8 +68,12 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     step = scene.step if step is None else float(step)
     if output_interval is None:
         output_interval = getattr(scene, "output_interval", None)
+    asked = output_interval is not None
     output_interval = step if output_interval is None else float(output_interval)
     cls = get_strategy(strategy or scene.coupling)
+    if asked and output_interval > 0.0 and cls.takes_long_steps:
+        # rows were asked for at this interval: no long step may jump over one
+        options.setdefault("max_long_step", output_interval)
     if system.initialized:
         system.reset()
     calls_before = system.fmu_calls()

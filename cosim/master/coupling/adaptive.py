@@ -149,6 +149,7 @@ class Adaptive(CouplingStrategy):
     """
 
     name = "adaptive"
+    takes_long_steps = True
     host = "zoh"        # Gauss-Seidel: building.fmu holds F exactly over the step it was computed for
 
     def __init__(self, system: "System", t0: float, t_bound: float, step: float, *,
