@@ -23,10 +23,10 @@ def thinned_and_full(catalog):
     and the same run recorded at every communication point with every output."""
     over = ["stop_time=6.0"]
     thin = simulate_scene(catalog, "default", over, output_interval=0.05, record="summary")
-    # rows asked for at 50 ms cap the long steps at 40 ms (cosim/master/simulate.py): the same
-    # steps for the run that records every communication point
-    full = simulate_scene(catalog, "default", over, max_long_step=0.04)
-    assert thin.stats["h_max_used"] == full.stats["h_max_used"] == pytest.approx(0.04)
+    # rows asked for at 50 ms = 5 base steps: no long step could land on them all, so none is
+    # taken (adaptive.row_step); the same steps for the run that records every point
+    full = simulate_scene(catalog, "default", over, long_steps=False)
+    assert thin.stats["h_max_used"] == full.stats["h_max_used"] == pytest.approx(0.01)
     return thin, full
 
 
@@ -39,7 +39,7 @@ def test_rows_at_the_output_interval(thinned_and_full):
     k = np.floor(t / 0.05 + 1e-9)
     assert np.all(np.diff(k) >= 1)
     assert set(range(int(k[-1]) + 1)) <= set(k.astype(int).tolist())
-    assert full.time.size > 1.5 * t.size        # the adaptive steps are finer near the impacts
+    assert full.time.size > 2 * t.size          # the adaptive steps are finer near the impacts
 
 
 def test_summary_is_the_same_whatever_is_recorded(thinned_and_full):
@@ -123,3 +123,14 @@ def test_300_s_record_in_bounded_memory(tmp_path, fmu_dir):
     assert rows == 3001
     # measured 170-180 MB, of which ~150 MB is the interpreter with numpy, scipy, fmpy and the FMUs
     assert rss_mb < 300, rss_mb
+
+
+def test_rows_asked_for_land_long_steps_on_them():
+    """adaptive.row_step: the longest dyadic step whose aligned steps land on every row."""
+    from cosim.master.coupling.adaptive import row_step
+
+    assert row_step(0.32, 0.01) == pytest.approx(0.32)
+    assert row_step(0.1, 0.01) == pytest.approx(0.02)       # 10 base steps = 2 x 5
+    assert row_step(0.05, 0.01) == pytest.approx(0.01)      # 5: no long step
+    assert row_step(0.015, 0.01) == pytest.approx(0.01)     # not a whole number of base steps
+    assert row_step(0.004, 0.01) == pytest.approx(0.01)

@@ -72,8 +72,8 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     output_interval = step if output_interval is None else float(output_interval)
     cls = get_strategy(strategy or scene.coupling)
     if asked and output_interval > 0.0 and cls.takes_long_steps:
-        # rows were asked for at this interval: no long step may jump over one
-        options.setdefault("max_long_step", output_interval)
+        # rows were asked for at this interval: every long step must end on them
+        options.setdefault("row_interval", output_interval)
     if system.initialized:
         system.reset()
     calls_before = system.fmu_calls()

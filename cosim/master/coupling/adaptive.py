@@ -83,6 +83,16 @@ def closure_time(delta: float, delta_dot: float, accel_bound: float) -> float:
     return math.inf
 
 
+def row_step(row_interval: float, h_base: float) -> float:
+    """Longest dyadic step (``h_base`` times a power of 2, s) whose aligned steps land on every
+    multiple of ``row_interval`` (s): ``h_base`` times the largest power of 2 dividing
+    ``row_interval / h_base``, or ``h_base`` when that is not a whole number."""
+    n = round(row_interval / h_base)
+    if n < 1 or abs(n * h_base - row_interval) > 1e-9 * row_interval:
+        return h_base
+    return h_base * (n & -n)
+
+
 # -- the strategy ----------------------------------------------------------------------------------
 #: base steps one catch-up step of a waking contact spans at most (:mod:`cosim.master.dormancy`):
 #: the resolver predicts a step's flight from the structures' motion over its previous step,
@@ -141,6 +151,9 @@ class Adaptive(CouplingStrategy):
     max_long_step : float
         Longest step (s), rounded down to ``h_base`` times a power of 2 (default 0.32 s: 32
         samples of a 100 Hz record, what the FMUs' 33 knots carry).
+    row_interval : float, optional
+        History rows asked for at every multiple of it (s): long steps are then at most
+        :func:`row_step` long, so that every row time is a communication point.
 
     Counters: ``communication_steps`` (accepted), ``rollbacks`` (rejected and retried),
     ``stats`` (``saved_states``, ``missed_events``, ``h_min_used``, ``h_max_used``, ``long_steps``,
@@ -155,7 +168,8 @@ class Adaptive(CouplingStrategy):
     def __init__(self, system: "System", t0: float, t_bound: float, step: float, *,
                  contact_fraction: float | None = None, max_halvings: int = 16, accel_safety: float = 2.0,
                  risk_factor: float = 2.0, knots: bool = True, dormancy: bool = True,
-                 long_steps: bool | None = None, max_long_step: float = 0.32, catch_up_span: float | None = None):
+                 long_steps: bool | None = None, max_long_step: float = 0.32, catch_up_span: float | None = None,
+                 row_interval: float | None = None):
         super().__init__(system, t0, t_bound, step)
         self.levels = contact_levels(system)
         if contact_fraction is None:
@@ -203,7 +217,10 @@ class Adaptive(CouplingStrategy):
                           or fmu_spec(POUNDING).long_quiet_steps)
         self.long_levels = 0
         if long_steps and self._gaps is not None and (self._look is not None or not system.ground):
-            self.long_levels = max(0, int(math.floor(math.log2(max_long_step / self.h_max) + 1e-9)))
+            # rows asked for: no longer than a step that lands on every row (the ground motion is
+            # still read ahead in chunks of max_long_step)
+            longest = max_long_step if row_interval is None else min(max_long_step, row_step(row_interval, self.h))
+            self.long_levels = max(0, int(math.floor(math.log2(longest / self.h_max) + 1e-9)))
         self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
 
     def _knot_capacity(self) -> int:

@@ -56,8 +56,9 @@ class CouplingStrategy:
     #: parameter ``host`` (fmu_src.host_observer.HOSTS) the master declares for every contact whose
     #: scene leaves it unset; "any" lets the contact measure it
     host = "any"
-    #: takes steps longer than ``step`` (keyword ``max_long_step``, s): a run that asks for
-    #: history rows at an output interval caps them there (cosim.master.simulate)
+    #: takes steps longer than ``step``: a run that asks for history rows at an output interval
+    #: passes it as the keyword ``row_interval`` (s), and the steps land on every row time
+    #: (cosim.master.simulate)
     takes_long_steps = False
 
     def __init__(self, system: "System", t0: float, t_bound: float, step: float):
