@@ -3,27 +3,47 @@
 The FMU files travel to the workers inside a worker plugin (:class:`StudyPlugin`), so a
 remote worker needs only this package installed; each worker process keeps one
 :class:`~cosim.apps.study.runner.CaseRunner`.  Rows are written as cases finish.
+
+Before any case is sent, every worker's environment is checked
+(:mod:`~cosim.apps.study.environment`: this package at the submitter's version and its install
+requirements); a worker that joins later is checked by the plugin itself (a plugin that cannot
+be unpickled, or that finds another package version, stops the worker before it takes a case).
+A worker lost mid-study costs nothing: Dask reruns its cases elsewhere.  A lost scheduler ends
+the study with :class:`ClusterLost` (the rows written are kept; ``--resume`` completes them).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import logging
 import os
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from ... import __version__
 from ...fmus import FMU_NAMES, default_fmu_dir
 from ...master.scene import Override
 from ...master.system import Catalog
 from .cases import Case
-from .results_io import _prepare_folder, _RowWriter, columns_for, one_line, write_parquet
+from .environment import refusal, unfit, worker_environments
+from .results_io import (_RowWriter, claim_folder, columns_for, one_line, recorded_rows, start_results,
+                         write_parquet)
 from .runner import CaseRunner, validate_study
 from .spec import Study, StudyError, load_study
 
-CONNECT_TIMEOUT_S = 5.0           # an unreachable scheduler is reported after this long
+CONNECT_TIMEOUT_S = 5.0    # an unreachable scheduler is reported after this long
+WORKER_WAIT_S = 60.0       # a scheduler without workers: how long to wait for the first one
+
+
+class ClusterLost(RuntimeError):
+    """The Dask scheduler went away during a study (exit 1): the rows written are kept, and
+    ``--resume`` on a new scheduler completes the study."""
 
 
 def fmu_hashes(fmu_dir: Path) -> dict[str, str]:
@@ -35,15 +55,23 @@ class StudyPlugin(WorkerPlugin):
 
     Registered under a name derived from the FMUs' hashes, so studies with
     other FMUs on the same cluster get their own runner.  On a worker the FMUs
-    are written once into the worker's local directory.
+    are written once into the worker's local directory.  ``setup`` refuses a worker with
+    another version of this package (it would compute the rows with other code): Dask then
+    stops that worker before it takes a case, which guards the workers that join mid-study.
     """
 
-    def __init__(self, fmu_dir: Path, hashes: Mapping[str, str]):
+    def __init__(self, fmu_dir: Path, hashes: Mapping[str, str], package_version: str = __version__):
         self.files = {name: (Path(fmu_dir) / f"{name}.fmu").read_bytes() for name in hashes}
         self.name = "cosim-study-" + hashlib.sha256("".join(sorted(hashes.values())).encode()).hexdigest()[:12]
+        self.package_version = package_version
         self.runner: CaseRunner | None = None
 
     def setup(self, worker) -> None:
+        from ... import __version__ as here
+
+        if here != self.package_version:
+            raise RuntimeError(f"pounding-cosim {here} on this worker, {self.package_version} on the study's "
+                               f"submitter: install the same version on every worker")
         folder = Path(worker.local_directory) / self.name
         folder.mkdir(parents=True, exist_ok=True)
         for name, data in self.files.items():
@@ -74,14 +102,57 @@ def _run_case_on_worker(plugin_name: str, scene_raw: dict, overrides: list[Overr
     return get_worker().plugins[plugin_name].case_runner().run(scene_raw, overrides, tolerance)
 
 
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored in this process while the block runs (main thread only; a no-op elsewhere)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield   # signal dispositions are set from the main thread only
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def local_cluster(n: int, timeout: float = WORKER_WAIT_S):
+    """``(client, cluster)``: a ``LocalCluster`` of ``n`` worker processes, one thread each, whose
+    workers never see a Ctrl-C.
+
+    A Ctrl-C in a terminal sends SIGINT to the whole foreground process group, the local
+    cluster's worker processes included: each would print its own KeyboardInterrupt traceback
+    and die under the study.  An ignored signal stays ignored across ``exec`` and Python then
+    leaves it so; the workers are therefore spawned while this process ignores SIGINT, for the
+    few milliseconds until they exist (not while they import and register, 1-3 s), and only the
+    study's own process gets a Ctrl-C: it cancels the cases and stops the workers in order.
+    """
+    import multiprocessing
+
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.CRITICAL)   # a case's failure is in its row
+    try:
+        before = len(multiprocessing.active_children())
+        deadline = time.monotonic() + timeout
+        with _sigint_ignored():
+            cluster.scale(n)
+            while len(multiprocessing.active_children()) < before + n and time.monotonic() < deadline:
+                time.sleep(0.005)
+        client = Client(cluster)
+        client.wait_for_workers(n, timeout=timeout)
+    except BaseException:
+        cluster.close()
+        raise
+    return client, cluster
+
+
 def connect(scheduler: str | None = None, workers: int | None = None,
             timeout: float = CONNECT_TIMEOUT_S):
     """``(client, cluster)``: a ``distributed.Client`` to ``scheduler`` (``cluster`` None; a
-    :class:`StudyError` after ``timeout`` s if it does not answer), or to a new ``LocalCluster``
-    of ``workers`` processes with one thread each (default: one per core)."""
-    import logging
-
-    from distributed import Client, LocalCluster
+    :class:`StudyError` after ``timeout`` s if it does not answer), or to a new local cluster
+    (:func:`local_cluster`) of ``workers`` processes with one thread each (default: one per core)."""
+    from distributed import Client
 
     if scheduler:
         try:
@@ -94,9 +165,23 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     n = workers or os.cpu_count() or 1
     if n < 1:
         raise StudyError(f"--workers {workers}: needs at least 1 worker")
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
-    return Client(cluster), cluster
+    return local_cluster(n)
+
+
+def check_workers(client, wait_s: float = WORKER_WAIT_S) -> int:
+    """Wait (at most ``wait_s``) for a first worker, then check every worker's environment
+    (:mod:`.environment`); raise :class:`StudyError` naming each worker that cannot run the
+    cases.  Returns the number of workers."""
+    try:
+        client.wait_for_workers(1, timeout=wait_s)
+    except TimeoutError:
+        raise StudyError(f"the Dask scheduler at {client.scheduler.address} has no worker, and none joined "
+                         f"within {wait_s:g} s: start workers (dask worker {client.scheduler.address})") from None
+    environments = worker_environments(client)
+    bad = unfit(environments, __version__)
+    if bad:
+        raise StudyError(refusal(bad, len(environments)))
+    return len(environments)
 
 
 # -- running a study -------------------------------------------------------------------------------
@@ -110,7 +195,7 @@ class StudyResult:
     csv: Path
     parquet: Path
     n_cases: int
-    skipped: int                  # already in the CSV (--resume)
+    skipped: int                  # already in the CSV (--resume): kept, not run
     ran: int
     failed: int                   # status failed or unstable, among the cases run now
     workers: int
@@ -118,19 +203,25 @@ class StudyResult:
     elapsed_s: float
     validation_s: float
     rows: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the rows of the cases run now
+    retried: int = 0              # failed or unstable rows dropped to run their cases again (--retry-failed)
 
 
 def run_study(study: Study | str | Path, out: str | Path | None = None, *, workers: int | None = None,
-              scheduler: str | None = None, client=None, resume: bool = False, fmu_dir: str | Path | None = None,
-              progress: bool = True, connect_timeout: float = CONNECT_TIMEOUT_S) -> StudyResult:
+              scheduler: str | None = None, client=None, resume: bool = False, retry_failed: bool = False,
+              fmu_dir: str | Path | None = None, progress: bool = True,
+              connect_timeout: float = CONNECT_TIMEOUT_S, worker_wait: float = WORKER_WAIT_S) -> StudyResult:
     """Validate, then run every case not yet recorded, appending rows to ``out/results.csv``.
 
     ``client``: an existing ``distributed.Client`` (then ``workers`` and
-    ``scheduler`` are ignored and the client is left open).  Raises
-    :class:`StudyError` for bad input before any case runs.
+    ``scheduler`` are ignored and the client is left open).  ``resume``: complete the rows
+    already in ``out``; ``retry_failed`` (implies ``resume``): run the failed and unstable
+    cases again too.  Raises :class:`StudyError` for bad input before any case runs (the
+    study, the folder, its lock held by another study, the scheduler, a worker's environment)
+    and :class:`ClusterLost` when the scheduler goes away.
     """
     if not isinstance(study, Study):
         study = load_study(study)
+    resume = resume or retry_failed
     fmu_dir = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
     t0 = time.perf_counter()
     try:
@@ -147,41 +238,51 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
     cases = study.cases()
     folder = Path(out) if out is not None else Path("out") / "studies" / study.name
 
-    t0 = time.perf_counter()
-    own = client is None
-    cluster = None
-    if own:
-        client, cluster = connect(scheduler, workers, connect_timeout)
-    writer = None
-    try:
-        startup_s = time.perf_counter() - t0
-        done = _prepare_folder(folder, study.fingerprint(hashes), header, resume)
-        pending = [c for c in cases if c.id not in done]
-        plugin = StudyPlugin(fmu_dir, hashes)
-        n_workers = len(client.nthreads())
-        writer = _RowWriter(folder / "results.csv", header)
-        rows, failed = [], 0
-        t1 = time.perf_counter()
-        if pending:
-            client.register_plugin(plugin, name=plugin.name)
-            try:
-                rows, failed = _execute(client, plugin.name, study, pending, writer, progress,
-                                        len(cases) - len(pending))
-            finally:
-                if own:   # free the workers' FMU instances while their interpreters are alive
-                    _unregister(client, plugin.name)
-        elapsed_s = time.perf_counter() - t1
-    finally:
-        if writer is not None:
-            writer.close()
-            write_parquet(folder / "results.csv", folder / "results.parquet")
+    fingerprint = study.fingerprint(hashes)
+    with claim_folder(folder) as claim:   # the folder's lock: one writer at a time
+        recorded = recorded_rows(folder, fingerprint, header, resume)
+        keep = {r["case_id"] for r in recorded if r["status"] == "ok" or not retry_failed}
+        pending = [c for c in cases if c.id not in keep]
+        t0 = time.perf_counter()
+        own = client is None
+        cluster = None
         if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            client, cluster = connect(scheduler, workers, connect_timeout)
+        writer = None
+        lost = None
+        try:
+            n_workers = check_workers(client, worker_wait)
+            startup_s = time.perf_counter() - t0
+            retried = start_results(folder, fingerprint, recorded, retry_failed)
+            claim.written = True
+            plugin = StudyPlugin(fmu_dir, hashes)
+            writer = _RowWriter(folder / "results.csv", header)
+            rows, failed = [], 0
+            t1 = time.perf_counter()
+            if pending:
+                client.register_plugin(plugin, name=plugin.name)
+                try:
+                    rows, failed, lost = _execute(client, plugin.name, study, pending, writer, progress,
+                                                  len(cases) - len(pending))
+                finally:
+                    if own and lost is None:   # free the workers' FMU instances while their interpreters live
+                        _unregister(client, plugin.name)
+            elapsed_s = time.perf_counter() - t1
+        finally:
+            if writer is not None:
+                writer.close()
+                write_parquet(folder / "results.csv", folder / "results.parquet")
+            if own:
+                _close(client, cluster, lost is not None)
+    if lost is not None:
+        address = scheduler or getattr(client.scheduler, "address", "?")
+        raise ClusterLost(f"lost the Dask scheduler at {address} ({lost}): {len(rows)} of the {len(pending)} cases "
+                          f"of this run finished and are in {folder / 'results.csv'}, "
+                          f"{len(pending) - len(rows)} did not run; start a scheduler and workers and complete the "
+                          f"study with --resume --scheduler ADDRESS --out {folder}")
     return StudyResult(study, folder, folder / "results.csv", folder / "results.parquet", len(cases),
                        len(cases) - len(pending), len(rows), failed, n_workers, startup_s, elapsed_s,
-                       validation_s, rows)
+                       validation_s, rows, retried)
 
 
 def _unregister(client, name: str) -> None:
@@ -191,9 +292,27 @@ def _unregister(client, name: str) -> None:
         pass
 
 
+def _close(client, cluster, scheduler_lost: bool) -> None:
+    """Close the client (and the local cluster).  After a lost scheduler the client's reconnection
+    attempt, cancelled by ``close``, would log a traceback: that logger is silenced meanwhile."""
+    logger = logging.getLogger("distributed.client")
+    level = logger.level
+    if scheduler_lost:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        client.close(timeout=CONNECT_TIMEOUT_S)
+        if cluster is not None:
+            cluster.close()
+    finally:
+        logger.setLevel(level)
+
+
 def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer: _RowWriter,
-             progress: bool, already: int) -> tuple[list[dict], int]:
+             progress: bool, already: int) -> tuple[list[dict], int, str | None]:
+    """Submit the pending cases and write each row as it arrives.  Returns the rows, the number of
+    failed ones, and why the scheduler was lost (None if it was not)."""
     from distributed import as_completed
+    from distributed.client import FutureCancelledError
 
     scene_raw = study.scene_raw  # a few hundred bytes: sent with each task
     futures = {}
@@ -212,7 +331,9 @@ def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer
             case = futures[future.key][1]
             try:
                 row = future.result()
-            except Exception as exc:  # noqa: BLE001 - e.g. the worker died (KilledWorker): record and go on
+            except FutureCancelledError as exc:   # not by us: the scheduler is gone (or someone cancelled it)
+                return rows, failed, getattr(exc, "reason", None) or one_line(exc)
+            except Exception as exc:  # noqa: BLE001 - e.g. the case killed its workers (KilledWorker): a result
                 row = dict(status="failed", error=one_line(f"{type(exc).__name__}: {exc}"))
             row = {**row, "case_id": case.id, "case": case.index, **case.values}
             writer.write(row)
@@ -228,4 +349,4 @@ def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer
     finally:
         if bar is not None:
             bar.close()
-    return rows, failed
+    return rows, failed, None
