@@ -166,9 +166,14 @@ def cmd_study_run(args) -> int:
     except KeyboardInterrupt:
         print("interrupted: the finished cases are in the results; complete them with --resume", file=sys.stderr)
         return EXIT_INTERRUPTED
+    if result.stale_lock:
+        from .apps.study.lock import describe
+
+        print(f"note: took over the lock of a study that no longer runs ({describe(result.stale_lock)})")
     print(f"{study.name}: {result.n_cases} cases, {result.skipped} already done, {result.ran} run now "
           + (f"({result.retried} of them failed or unstable before) " if result.retried else "")
-          + f"({result.failed} failed or unstable) in {result.elapsed_s:.1f} s on {result.workers} workers")
+          + f"({result.failed} failed or unstable)"
+          + (f" in {result.elapsed_s:.1f} s on {result.workers} workers" if result.ran else ""))
     print(f"results: {result.csv}\n         {result.parquet}")
     return EXIT_OK
 

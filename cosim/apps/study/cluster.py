@@ -130,7 +130,10 @@ def local_cluster(n: int, timeout: float = WORKER_WAIT_S):
 
     from distributed import Client, LocalCluster
 
+    # no dashboard; the scheduler's HTTP server (health, metrics) on a free port of the loopback
+    # interface: its default, port 8787 on every interface, collides with any other Dask cluster
     cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                            silence_logs=logging.CRITICAL)   # a case's failure is in its row
     try:
         before = len(multiprocessing.active_children())
@@ -204,6 +207,7 @@ class StudyResult:
     validation_s: float
     rows: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the rows of the cases run now
     retried: int = 0              # failed or unstable rows dropped to run their cases again (--retry-failed)
+    stale_lock: dict[str, Any] | None = None   # the lock record of a dead study taken over (pid, host, ...)
 
 
 def run_study(study: Study | str | Path, out: str | Path | None = None, *, workers: int | None = None,
@@ -218,62 +222,58 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
     cases again too.  Raises :class:`StudyError` for bad input before any case runs (the
     study, the folder, its lock held by another study, the scheduler, a worker's environment)
     and :class:`ClusterLost` when the scheduler goes away.
+
+    Order: the folder is claimed (locked) first, so that a second writer is refused at once;
+    then the study is validated on the FMUs, the rows already there are read, and only then is
+    a cluster started or reached (not at all when every case has its row).
     """
     if not isinstance(study, Study):
         study = load_study(study)
     resume = resume or retry_failed
     fmu_dir = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
-    t0 = time.perf_counter()
-    try:
-        catalog = Catalog(fmu_dir)
-    except FileNotFoundError as exc:
-        raise StudyError(str(exc)) from None
-    try:
-        buildings = validate_study(study, catalog)
-    finally:
-        catalog.close()
-    validation_s = time.perf_counter() - t0
-    hashes = fmu_hashes(fmu_dir)
-    header = columns_for(study, buildings)
-    cases = study.cases()
     folder = Path(out) if out is not None else Path("out") / "studies" / study.name
-
-    fingerprint = study.fingerprint(hashes)
-    with claim_folder(folder) as claim:   # the folder's lock: one writer at a time
+    with claim_folder(folder) as claim:
+        t0 = time.perf_counter()
+        buildings = _validate(study, fmu_dir)
+        validation_s = time.perf_counter() - t0
+        hashes = fmu_hashes(fmu_dir)
+        header = columns_for(study, buildings)
+        fingerprint = study.fingerprint(hashes)
         recorded = recorded_rows(folder, fingerprint, header, resume)
         keep = {r["case_id"] for r in recorded if r["status"] == "ok" or not retry_failed}
+        cases = study.cases()
         pending = [c for c in cases if c.id not in keep]
-        t0 = time.perf_counter()
-        own = client is None
-        cluster = None
-        if own:
-            client, cluster = connect(scheduler, workers, connect_timeout)
-        writer = None
-        lost = None
-        try:
-            n_workers = check_workers(client, worker_wait)
-            startup_s = time.perf_counter() - t0
-            retried = start_results(folder, fingerprint, recorded, retry_failed)
-            claim.written = True
-            plugin = StudyPlugin(fmu_dir, hashes)
-            writer = _RowWriter(folder / "results.csv", header)
-            rows, failed = [], 0
-            t1 = time.perf_counter()
-            if pending:
+        rows, failed, lost, retried = [], 0, None, 0
+        n_workers, startup_s, elapsed_s = 0, 0.0, 0.0
+        if pending:
+            t0 = time.perf_counter()
+            own = client is None
+            cluster = None
+            if own:
+                client, cluster = connect(scheduler, workers, connect_timeout)
+            writer = None
+            try:
+                n_workers = check_workers(client, worker_wait)
+                startup_s = time.perf_counter() - t0
+                retried = start_results(folder, fingerprint, recorded, retry_failed)
+                claim.written = True
+                writer = _RowWriter(folder / "results.csv", header)
+                plugin = StudyPlugin(fmu_dir, hashes)
                 client.register_plugin(plugin, name=plugin.name)
+                t1 = time.perf_counter()
                 try:
                     rows, failed, lost = _execute(client, plugin.name, study, pending, writer, progress,
                                                   len(cases) - len(pending))
                 finally:
                     if own and lost is None:   # free the workers' FMU instances while their interpreters live
                         _unregister(client, plugin.name)
-            elapsed_s = time.perf_counter() - t1
-        finally:
-            if writer is not None:
-                writer.close()
-                write_parquet(folder / "results.csv", folder / "results.parquet")
-            if own:
-                _close(client, cluster, lost is not None)
+                elapsed_s = time.perf_counter() - t1
+            finally:
+                if writer is not None:
+                    writer.close()
+                    write_parquet(folder / "results.csv", folder / "results.parquet")
+                if own:
+                    _close(client, cluster, lost is not None)
     if lost is not None:
         address = scheduler or getattr(client.scheduler, "address", "?")
         raise ClusterLost(f"lost the Dask scheduler at {address} ({lost}): {len(rows)} of the {len(pending)} cases "
@@ -282,7 +282,19 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
                           f"study with --resume --scheduler ADDRESS --out {folder}")
     return StudyResult(study, folder, folder / "results.csv", folder / "results.parquet", len(cases),
                        len(cases) - len(pending), len(rows), failed, n_workers, startup_s, elapsed_s,
-                       validation_s, rows, retried)
+                       validation_s, rows, retried, claim.lock.stale)
+
+
+def _validate(study: Study, fmu_dir: Path) -> list[str]:
+    """:func:`validate_study` on the FMUs of ``fmu_dir``; the names of the scene's buildings."""
+    try:
+        catalog = Catalog(fmu_dir)
+    except FileNotFoundError as exc:
+        raise StudyError(str(exc)) from None
+    try:
+        return validate_study(study, catalog)
+    finally:
+        catalog.close()
 
 
 def _unregister(client, name: str) -> None:

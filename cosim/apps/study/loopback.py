@@ -125,6 +125,7 @@ class LoopbackCluster:
         folder = self.root / f"scheduler-{self._schedulers}"
         file = folder / "scheduler.json"
         process = self._spawn("scheduler", ["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                            "--dashboard-address", "127.0.0.1:0",
                                             "--scheduler-file", str(file)], folder)
         self.scheduler = process
         deadline = time.monotonic() + START_TIMEOUT_S
@@ -149,7 +150,7 @@ class LoopbackCluster:
             raise LoopbackError(f"worker {name!r}: no scheduler, or the name is taken")
         folder = self.root / name
         (folder / "tmp").mkdir(parents=True, exist_ok=True)
-        argv = ["worker", self.address, "--name", name, "--nthreads", "1", "--no-dashboard",
+        argv = ["worker", self.address, "--name", name, "--nthreads", "1", "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
                 "--local-directory", str(folder / "local"), "--nanny" if nanny else "--no-nanny"]
         process = self._spawn(name, argv, folder, {"TMPDIR": str(folder / "tmp"), **(env or {})}, python,
                               python_flags)
