@@ -166,6 +166,8 @@ def cmd_study_run(args) -> int:
     except KeyboardInterrupt:
         print("interrupted: the finished cases are in the results; complete them with --resume", file=sys.stderr)
         return EXIT_INTERRUPTED
+    for worker in result.unfit_workers:
+        print(f"note: a worker that joined cannot run the cases, its cases ran on the others: {worker}")
     if result.stale_lock:
         from .apps.study.lock import describe
 

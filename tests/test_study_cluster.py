@@ -43,14 +43,16 @@ stop_time = 3.0          # s: El Centro makes the buildings pound within 3 s at 
 "pounding.gap" = [0.0, 0.01, 0.02]
 """
 
-# 16 cases for the faults: enough that a fault lands mid-study; each a few tenths of a second
-FAULTS = """
+# 12 cases for the faults: the faults are timed by freezing a worker (SIGSTOP) after 3 rows, so
+# that cases remain whatever the machine's speed; each case a few tenths of a second
+N_FAULTS = 12
+FAULTS = f"""
 name = "faults"
 scene = "default"
 [set]
-stop_time = 4.0
+stop_time = 3.0
 [vary]
-"pounding.gap" = { start = 0.0, stop = 0.03, num = 16 }
+"pounding.gap" = {{ start = 0.0, stop = 0.03, num = {N_FAULTS} }}
 """
 
 
@@ -121,6 +123,13 @@ def assert_same_rows(rows: list[dict], expected: dict[str, dict], study) -> None
 
 
 @pytest.fixture(scope="module")
+def faults_study(tmp_path_factory, fmu_dir):
+    """The faults' study file, and each of its cases run alone ({case_id: row})."""
+    path = write(tmp_path_factory.mktemp("faults") / "faults.toml", FAULTS)
+    return path, alone(load_study(path), fmu_dir)
+
+
+@pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
     """A scheduler and two workers, each worker in its own folder; stopped at the end of the module."""
     with LoopbackCluster(tmp_path_factory.mktemp("loopback")) as loopback:
@@ -167,7 +176,7 @@ def test_cluster_rows_equal_local_cluster_and_alone(tmp_path, fmu_dir, cluster, 
     assert sum(r["impacts"] for r in rows) > 0 and all(r["status"] == "ok" for r in rows)
 
 
-def test_worker_lost_and_worker_joining(tmp_path, fmu_dir, processes):
+def test_worker_lost_and_worker_joining(tmp_path, fmu_dir, faults_study, processes):
     """One worker starts the study; after 3 rows it hangs (SIGSTOP) with cases assigned, a second
     worker joins and takes cases, then the first is killed (SIGKILL of its process group, a lost
     machine).  The study ends normally: every case exactly once, equal to the case run alone; the
@@ -175,7 +184,7 @@ def test_worker_lost_and_worker_joining(tmp_path, fmu_dir, processes):
     on the joiner."""
     from distributed import Client
 
-    study_file = write(tmp_path / "faults.toml", FAULTS)
+    study_file, expected = faults_study
     study = load_study(study_file)
     out = tmp_path / "out"
     with LoopbackCluster(tmp_path / "cluster") as loopback:
@@ -197,7 +206,7 @@ def test_worker_lost_and_worker_joining(tmp_path, fmu_dir, processes):
                 t[0] for t in dask_scheduler.transition_log
                 if str(t[0]).startswith("cosim-case-") and t[1] == "processing" and t[2] != "memory"])
     _, rows = read_results(out / "results.csv")
-    assert_same_rows(rows, alone(study, fmu_dir), study)
+    assert_same_rows(rows, expected, study)
     by_worker = {}
     for r in rows:
         by_worker.setdefault(r["worker"], []).append(r["case_id"])
@@ -206,12 +215,12 @@ def test_worker_lost_and_worker_joining(tmp_path, fmu_dir, processes):
     assert lost and lost <= set(by_worker[joiner_pid]), (released, by_worker)   # held by the lost worker, rerun
 
 
-def test_scheduler_lost_then_resume_on_a_new_scheduler(tmp_path, fmu_dir, processes):
+def test_scheduler_lost_then_resume_on_a_new_scheduler(tmp_path, fmu_dir, faults_study, processes):
     """The scheduler is killed mid-study (its worker hangs first, so that cases remain): the study
     ends at once with exit 1, one line naming the scheduler and --resume, no traceback, and the
     rows written are kept.  `--resume` on a new scheduler and worker completes the study: every
     case once, the earlier rows byte for byte, all equal to the cases run alone."""
-    study_file = write(tmp_path / "faults.toml", FAULTS)
+    study_file, expected = faults_study
     study = load_study(study_file)
     out = tmp_path / "out"
     with LoopbackCluster(tmp_path / "cluster") as loopback:
@@ -231,18 +240,18 @@ def test_scheduler_lost_then_resume_on_a_new_scheduler(tmp_path, fmu_dir, proces
         assert ended_s < 30   # at once (a few seconds for the client to give up and close), not a hang
         before = (out / "results.csv").read_text()
         n_before = before.count("\n") - 1
-        assert 3 <= n_before < 16 and not (out / "study.lock").exists()
+        assert 3 <= n_before < N_FAULTS and not (out / "study.lock").exists()
 
         loopback.start_scheduler()
         loopback.add_worker("b")
         done = subprocess.run(study_command(study_file, out, fmu_dir, "--resume", "--scheduler", loopback.address),
                               cwd=tmp_path, capture_output=True, text=True, timeout=STUDY_TIMEOUT_S)
         assert done.returncode == 0, done.stderr
-        assert f"{n_before} already done, {16 - n_before} run now" in done.stdout
+        assert f"{n_before} already done, {N_FAULTS - n_before} run now" in done.stdout
     after = (out / "results.csv").read_text()
     assert after.startswith(before)
     _, rows = read_results(out / "results.csv")
-    assert_same_rows(rows, alone(study, fmu_dir), study)
+    assert_same_rows(rows, expected, study)
 
 
 def site_packages_without(folder: Path, exclude: tuple[str, ...], fake_version: str | None = None,
@@ -264,12 +273,18 @@ def site_packages_without(folder: Path, exclude: tuple[str, ...], fake_version: 
     return os.pathsep.join([str(folder)] + ([str(ROOT)] if fake_version or with_sources else []))
 
 
-def test_workers_that_cannot_run_the_cases_are_named_before_anything_is_sent(tmp_path, fmu_dir, processes):
+def test_workers_that_cannot_run_the_cases_are_named_before_anything_is_sent(tmp_path, fmu_dir, faults_study,
+                                                                            processes):
     """Three workers started from environments (python -S and a PYTHONPATH of this venv's
     site-packages with entries left out) that lack: this package; fmpy and pythonfmu; the
     submitter's package version (0.0.1 installed).  One good worker.  The study is refused with
     exit 2 naming each bad worker and what it lacks (not the good one), before any case or the
-    study's plugin reached any worker, and nothing is written."""
+    study's plugin reached any worker, and nothing is written.
+
+    Then a worker of the old version joins a running study (the good worker frozen, so that it
+    joins mid-study and is offered cases): the study's plugin finds it unfit, the cases offered
+    to it go back to the good worker, the study ends with every row from the good worker, and
+    the joiner is named in a note."""
     from distributed import Client
 
     import cosim
@@ -303,3 +318,30 @@ def test_workers_that_cannot_run_the_cases_are_named_before_anything_is_sent(tmp
             assert plugins and not any(plugins.values())   # the study's plugin reached no worker
             tasks = client.run_on_scheduler(lambda dask_scheduler: [str(k) for k in dask_scheduler.tasks])
             assert not [k for k in tasks if k.startswith("cosim-case-")]   # no case was submitted
+
+        for name in ("no-package", "no-fmpy", "old-version"):
+            loopback.workers[name].stop()
+        study_file, expected = faults_study
+        out = tmp_path / "joined"
+        p = submit(study_file, out, fmu_dir, tmp_path, "--scheduler", loopback.address)
+        processes.append(p)
+        wait_rows(out / "results.csv", 3, p)
+        loopback.workers["good"].freeze()
+        loopback.add_worker("old-joiner", python_flags=["-S"],
+                            env={"PYTHONPATH": site_packages_without(tmp_path / "sp4", package, fake_version="0.0.1")})
+        with Client(loopback.address) as client:
+            deadline = time.monotonic() + STUDY_TIMEOUT_S
+            while not client.run_on_scheduler(
+                    lambda dask_scheduler: any("-rerouted-" in str(k) for k in dask_scheduler.tasks)):
+                assert time.monotonic() < deadline, "no case offered to the joiner came back"
+                time.sleep(0.05)
+            loopback.workers["good"].thaw()
+            stdout, err = p.communicate(timeout=STUDY_TIMEOUT_S)
+            assert p.returncode == 0, err
+            good = client.run(lambda: f"{os.uname().nodename}:{os.getpid()}",
+                              workers=[a for a, w in client.scheduler_info()["workers"].items() if w["name"] == "good"])
+        assert "note: a worker that joined cannot run the cases, its cases ran on the others: " in stdout
+        assert "(name old-joiner," in stdout and f"pounding-cosim 0.0.1, the submitter has {cosim.__version__}" in stdout
+        _, rows = read_results(out / "results.csv")
+        assert_same_rows(rows, expected, load_study(study_file))
+        assert {r["worker"] for r in rows} == set(good.values())

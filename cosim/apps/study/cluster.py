@@ -22,7 +22,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any, Iterator, Mapping, Sequence
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
@@ -31,7 +31,7 @@ from ...fmus import FMU_NAMES, default_fmu_dir
 from ...master.scene import Override
 from ...master.system import Catalog
 from .cases import Case
-from .environment import refusal, unfit, worker_environments
+from .environment import WorkerEnvironment, probe, refusal, unfit, worker_environments, worker_requirements
 from .results_io import (_RowWriter, claim_folder, columns_for, one_line, recorded_rows, start_results,
                          write_parquet)
 from .runner import CaseRunner, validate_study
@@ -42,12 +42,18 @@ WORKER_WAIT_S = 60.0       # a scheduler without workers: how long to wait for t
 
 
 class ClusterLost(RuntimeError):
-    """The Dask scheduler went away during a study (exit 1): the rows written are kept, and
-    ``--resume`` on a new scheduler completes the study."""
+    """The study had to stop (exit 1): the Dask scheduler went away, or no worker is left that
+    can run the cases.  The rows written are kept; ``--resume`` completes the study."""
 
 
 def fmu_hashes(fmu_dir: Path) -> dict[str, str]:
     return {n: hashlib.sha256((fmu_dir / f"{n}.fmu").read_bytes()).hexdigest() for n in FMU_NAMES}
+
+
+class WorkerUnfit(RuntimeError):
+    """Raised by a case sent to a worker that cannot run it (it joined after the start's check
+    and lacks a requirement or has another version of this package): not a row; the case goes
+    to the workers that can."""
 
 
 class StudyPlugin(WorkerPlugin):
@@ -55,28 +61,36 @@ class StudyPlugin(WorkerPlugin):
 
     Registered under a name derived from the FMUs' hashes, so studies with
     other FMUs on the same cluster get their own runner.  On a worker the FMUs
-    are written once into the worker's local directory.  ``setup`` refuses a worker with
-    another version of this package (it would compute the rows with other code): Dask then
-    stops that worker before it takes a case, which guards the workers that join mid-study.
+    are written once into the worker's local directory.
+
+    A worker that joins mid-study was not in the start's check: ``setup`` runs the same check
+    (:func:`~cosim.apps.study.environment.probe`; a worker that cannot even unpickle the plugin,
+    lacking this package or fmpy, is stopped by Dask itself).  A worker found unfit keeps its
+    reasons in ``unfit`` (and its log): every case sent to it raises :class:`WorkerUnfit`
+    instead of computing rows with other code.
     """
 
     def __init__(self, fmu_dir: Path, hashes: Mapping[str, str], package_version: str = __version__):
         self.files = {name: (Path(fmu_dir) / f"{name}.fmu").read_bytes() for name in hashes}
         self.name = "cosim-study-" + hashlib.sha256("".join(sorted(hashes.values())).encode()).hexdigest()[:12]
         self.package_version = package_version
+        self.requirements = worker_requirements()
         self.runner: CaseRunner | None = None
+        self.unfit: str | None = None
 
     def setup(self, worker) -> None:
-        from ... import __version__ as here
-
-        if here != self.package_version:
-            raise RuntimeError(f"pounding-cosim {here} on this worker, {self.package_version} on the study's "
-                               f"submitter: install the same version on every worker")
+        environment = WorkerEnvironment(worker.address, probe(self.requirements, dask_worker=worker))
+        problems = environment.problems(self.package_version)
+        self.files, files = {}, self.files
+        if problems:
+            self.unfit = f"worker {environment.label()}: {'; '.join(problems)}"
+            logging.getLogger("distributed.worker").error("this worker cannot run the study's cases: %s",
+                                                          self.unfit)
+            return
         folder = Path(worker.local_directory) / self.name
         folder.mkdir(parents=True, exist_ok=True)
-        for name, data in self.files.items():
+        for name, data in files.items():
             (folder / f"{name}.fmu").write_bytes(data)
-        self.files = {}
         self.folder = folder
 
     def case_runner(self) -> CaseRunner:
@@ -86,6 +100,8 @@ class StudyPlugin(WorkerPlugin):
         them in its task thread corrupts the heap: glibc aborts the worker process at exit
         ("free(): corrupted unsorted chunks").
         """
+        if self.unfit is not None:
+            raise WorkerUnfit(self.unfit)
         if self.runner is None:
             self.runner = CaseRunner(self.folder)
         return self.runner
@@ -171,10 +187,10 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     return local_cluster(n)
 
 
-def check_workers(client, wait_s: float = WORKER_WAIT_S) -> int:
+def check_workers(client, wait_s: float = WORKER_WAIT_S) -> list[str]:
     """Wait (at most ``wait_s``) for a first worker, then check every worker's environment
     (:mod:`.environment`); raise :class:`StudyError` naming each worker that cannot run the
-    cases.  Returns the number of workers."""
+    cases.  Returns the workers' addresses."""
     try:
         client.wait_for_workers(1, timeout=wait_s)
     except TimeoutError:
@@ -184,7 +200,7 @@ def check_workers(client, wait_s: float = WORKER_WAIT_S) -> int:
     bad = unfit(environments, __version__)
     if bad:
         raise StudyError(refusal(bad, len(environments)))
-    return len(environments)
+    return [e.address for e in environments]
 
 
 # -- running a study -------------------------------------------------------------------------------
@@ -208,6 +224,7 @@ class StudyResult:
     rows: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the rows of the cases run now
     retried: int = 0              # failed or unstable rows dropped to run their cases again (--retry-failed)
     stale_lock: dict[str, Any] | None = None   # the lock record of a dead study taken over (pid, host, ...)
+    unfit_workers: list[str] = field(default_factory=list)   # joiners that could not run cases, and why
 
 
 def run_study(study: Study | str | Path, out: str | Path | None = None, *, workers: int | None = None,
@@ -243,7 +260,7 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
         keep = {r["case_id"] for r in recorded if r["status"] == "ok" or not retry_failed}
         cases = study.cases()
         pending = [c for c in cases if c.id not in keep]
-        rows, failed, lost, retried = [], 0, None, 0
+        rows, failed, lost, retried, unfit_workers = [], 0, None, 0, []
         n_workers, startup_s, elapsed_s = 0, 0.0, 0.0
         if pending:
             t0 = time.perf_counter()
@@ -253,7 +270,8 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
                 client, cluster = connect(scheduler, workers, connect_timeout)
             writer = None
             try:
-                n_workers = check_workers(client, worker_wait)
+                fit_workers = check_workers(client, worker_wait)
+                n_workers = len(fit_workers)
                 startup_s = time.perf_counter() - t0
                 retried = start_results(folder, fingerprint, recorded, retry_failed)
                 claim.written = True
@@ -262,10 +280,11 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
                 client.register_plugin(plugin, name=plugin.name)
                 t1 = time.perf_counter()
                 try:
-                    rows, failed, lost = _execute(client, plugin.name, study, pending, writer, progress,
-                                                  len(cases) - len(pending))
+                    rows, failed, lost, unfit_workers = _execute(client, plugin.name, study, pending, writer,
+                                                                 progress, len(cases) - len(pending),
+                                                                 _Fitness(fit_workers))
                 finally:
-                    if own and lost is None:   # free the workers' FMU instances while their interpreters live
+                    if own and client.status == "running":   # free the workers' FMU instances while they live
                         _unregister(client, plugin.name)
                 elapsed_s = time.perf_counter() - t1
             finally:
@@ -273,16 +292,14 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
                     writer.close()
                     write_parquet(folder / "results.csv", folder / "results.parquet")
                 if own:
-                    _close(client, cluster, lost is not None)
+                    _close(client, cluster, client.status != "running")
     if lost is not None:
-        address = scheduler or getattr(client.scheduler, "address", "?")
-        raise ClusterLost(f"lost the Dask scheduler at {address} ({lost}): {len(rows)} of the {len(pending)} cases "
-                          f"of this run finished and are in {folder / 'results.csv'}, "
-                          f"{len(pending) - len(rows)} did not run; start a scheduler and workers and complete the "
-                          f"study with --resume --scheduler ADDRESS --out {folder}")
+        raise ClusterLost(f"{lost}: {len(rows)} of the {len(pending)} cases of this run finished and are in "
+                          f"{folder / 'results.csv'}, {len(pending) - len(rows)} did not run; start a scheduler "
+                          f"and workers and complete the study with --resume --scheduler ADDRESS --out {folder}")
     return StudyResult(study, folder, folder / "results.csv", folder / "results.parquet", len(cases),
                        len(cases) - len(pending), len(rows), failed, n_workers, startup_s, elapsed_s,
-                       validation_s, rows, retried, claim.lock.stale)
+                       validation_s, rows, retried, claim.lock.stale, unfit_workers)
 
 
 def _validate(study: Study, fmu_dir: Path) -> list[str]:
@@ -319,19 +336,49 @@ def _close(client, cluster, scheduler_lost: bool) -> None:
         logger.setLevel(level)
 
 
+class _Fitness:
+    """Which workers can run the cases: those of the start's check, and joiners checked when one
+    of them refuses a case.  A worker is probed once (a hung worker the start's check passed is
+    not asked again, which would hang the study)."""
+
+    def __init__(self, fit: Sequence[str]):
+        self.fit = set(fit)
+        self.unfit: dict[str, str] = {}    # address -> "label: problems"
+
+    def refresh(self, client) -> list[str]:
+        """Probe the workers not seen yet; return the addresses of the fit ones present now."""
+        present = set(client.scheduler_info()["workers"])
+        new = sorted(present - self.fit - set(self.unfit))
+        if new:
+            for env in worker_environments(client, new):
+                problems = env.problems(__version__)
+                if problems:
+                    self.unfit[env.address] = f"{env.label()}: {'; '.join(problems)}"
+                else:
+                    self.fit.add(env.address)
+        return sorted(self.fit & present)
+
+
+MAX_REROUTES = 3   # a case refused by unfit workers this often ends the study (exit 1, --resume later)
+
+
 def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer: _RowWriter,
-             progress: bool, already: int) -> tuple[list[dict], int, str | None]:
+             progress: bool, already: int, fitness: _Fitness) -> tuple[list[dict], int, str | None, list[str]]:
     """Submit the pending cases and write each row as it arrives.  Returns the rows, the number of
-    failed ones, and why the scheduler was lost (None if it was not)."""
+    failed ones, why the study had to stop (None if it did not: the scheduler lost, no worker
+    able to run the cases) and the workers found unfit on the way (joiners)."""
     from distributed import as_completed
     from distributed.client import FutureCancelledError
 
-    scene_raw = study.scene_raw  # a few hundred bytes: sent with each task
-    futures = {}
-    for case in pending:
-        future = client.submit(_run_case_on_worker, plugin_name, scene_raw, list(study.fixed) + case.overrides,
-                               study.energy_tolerance, key=f"cosim-case-{study.name}-{case.id}", pure=False)
-        futures[future.key] = (future, case)
+    def submit(case: Case, attempt: int = 0, workers: list[str] | None = None):
+        future = client.submit(_run_case_on_worker, plugin_name, study.scene_raw, list(study.fixed) + case.overrides,
+                               study.energy_tolerance, key=f"cosim-case-{study.name}-{case.id}"
+                               + (f"-rerouted-{attempt}" if attempt else ""), pure=False, workers=workers)
+        futures[future.key] = (future, case, attempt)
+        return future
+
+    futures: dict[str, tuple[Any, Case, int]] = {}
+    completed = as_completed([submit(case) for case in pending])
     bar = None
     if progress:
         from tqdm import tqdm
@@ -339,12 +386,21 @@ def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer
         bar = tqdm(total=already + len(pending), initial=already, unit="case", desc=study.name, smoothing=0.1)
     rows, failed = [], 0
     try:
-        for future in as_completed([f for f, _ in futures.values()]):
-            case = futures[future.key][1]
+        for future in completed:
+            _, case, attempt = futures.pop(future.key)
             try:
                 row = future.result()
             except FutureCancelledError as exc:   # not by us: the scheduler is gone (or someone cancelled it)
-                return rows, failed, getattr(exc, "reason", None) or one_line(exc)
+                address = getattr(client.scheduler, "address", "?")
+                return rows, failed, f"lost the Dask scheduler at {address} ({getattr(exc, 'reason', None)})", \
+                    list(fitness.unfit.values())
+            except WorkerUnfit as exc:   # a joiner the start's check did not see: the case goes elsewhere
+                fit = fitness.refresh(client)
+                if not fit or attempt >= MAX_REROUTES:
+                    return rows, failed, f"no worker left that can run the cases ({one_line(exc)})", \
+                        list(fitness.unfit.values())
+                completed.add(submit(case, attempt + 1, fit))
+                continue
             except Exception as exc:  # noqa: BLE001 - e.g. the case killed its workers (KilledWorker): a result
                 row = dict(status="failed", error=one_line(f"{type(exc).__name__}: {exc}"))
             row = {**row, "case_id": case.id, "case": case.index, **case.values}
@@ -356,9 +412,9 @@ def _execute(client, plugin_name: str, study: Study, pending: list[Case], writer
                 bar.set_postfix_str(f"failed {failed}", refresh=False)
                 bar.update(1)
     except BaseException:
-        client.cancel([f for f, _ in futures.values()])
+        client.cancel([f for f, _, _ in futures.values()])
         raise
     finally:
         if bar is not None:
             bar.close()
-    return rows, failed, None
+    return rows, failed, None, list(fitness.unfit.values())

@@ -68,6 +68,10 @@ class ClusterProcess:
         connections open, so the scheduler still counts on it)."""
         self.signal_group(signal.SIGSTOP)
 
+    def thaw(self) -> None:
+        """SIGCONT to the process group: a frozen process runs on."""
+        self.signal_group(signal.SIGCONT)
+
     def kill(self) -> None:
         """SIGKILL to the whole process group (the nanny and its worker process): a lost machine."""
         self.signal_group(signal.SIGKILL)
