@@ -17,6 +17,7 @@ test fails; every wait is bounded.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import sysconfig
@@ -80,7 +81,7 @@ def processes():
     for p in started:
         if p.poll() is None:
             try:
-                os.killpg(p.pid, 9)
+                os.killpg(p.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
             p.wait(10)

@@ -6,10 +6,11 @@ remote worker needs only this package installed; each worker process keeps one
 
 Before any case is sent, every worker's environment is checked
 (:mod:`~cosim.apps.study.environment`: this package at the submitter's version and its install
-requirements); a worker that joins later is checked by the plugin itself (a plugin that cannot
-be unpickled, or that finds another package version, stops the worker before it takes a case).
-A worker lost mid-study costs nothing: Dask reruns its cases elsewhere.  A lost scheduler ends
-the study with :class:`ClusterLost` (the rows written are kept; ``--resume`` completes them).
+requirements); a worker that joins later is checked by the plugin itself (Dask stops a worker
+that cannot unpickle the plugin; one the plugin finds unfit refuses the cases offered to it,
+which go to the checked workers).  A worker lost mid-study costs nothing: Dask reruns its cases
+elsewhere.  A lost scheduler ends the study with :class:`ClusterLost` (the rows written are
+kept; ``--resume`` completes them).
 """
 from __future__ import annotations
 
