@@ -250,11 +250,19 @@ def test_retry_failed_reruns_the_failed_and_the_missing_cases_only(tmp_path, fmu
 # -- the output folder -------------------------------------------------------------------------------
 def test_output_folder_of_someone_else_is_refused_untouched(tmp_path, fmu_dir, capsys):
     """--out naming a file, or a folder with a file no study wrote: exit 2 before anything runs,
-    the file and folder untouched."""
+    the file and folder untouched.  A study refused after it claimed a new nested folder leaves
+    no folder behind."""
     study = write(tmp_path / "fail.toml", FAIL)
     a_file = write(tmp_path / "notes.txt", "mine\n")
     assert cli_main(["study", str(study), "--out", str(a_file), "--fmu-dir", str(fmu_dir)]) == 2
     assert "is a file, not a folder" in capsys.readouterr().err and a_file.read_text() == "mine\n"
+
+    nested = tmp_path / "new" / "deeper" / "out"   # a study refused after claiming its folder: no debris
+    assert cli_main(["study", str(study), "--out", str(nested), "--fmu-dir", str(fmu_dir), "--max-cases", "3"]) == 2
+    assert "more than the 3" in capsys.readouterr().err and not (tmp_path / "new").exists()
+    assert cli_main(["study", str(study), "--out", str(nested), "--fmu-dir", str(fmu_dir),
+                     "--scheduler", "tcp://127.0.0.1:9"]) == 2   # claimed, validated, then no scheduler
+    assert "cannot reach the Dask scheduler" in capsys.readouterr().err and not (tmp_path / "new").exists()
 
     folder = tmp_path / "mine"
     folder.mkdir()

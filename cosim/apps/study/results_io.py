@@ -129,7 +129,7 @@ class FolderClaim:
     """A study folder claimed by :func:`claim_folder`: locked while the study writes.  ``written``:
     set once the study wrote into it (until then a folder the claim created is removed again)."""
 
-    def __init__(self, folder: Path, created: bool, lock: StudyLock):
+    def __init__(self, folder: Path, created: list[Path], lock: StudyLock):
         self.folder, self.created, self.lock, self.written = folder, created, lock, False
 
     def __enter__(self) -> "FolderClaim":
@@ -137,11 +137,12 @@ class FolderClaim:
 
     def __exit__(self, *exc) -> None:
         self.lock.release()
-        if self.created and not self.written:
-            try:
-                self.folder.rmdir()   # only if still empty: nothing of anyone's is removed
-            except OSError:
-                pass
+        if not self.written:
+            for path in self.created:   # deepest first: the folder, then the parents it needed
+                try:
+                    path.rmdir()   # only if still empty: nothing of anyone's is removed
+                except OSError:
+                    break
 
 
 def claim_folder(folder: Path) -> FolderClaim:
@@ -155,12 +156,16 @@ def claim_folder(folder: Path) -> FolderClaim:
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise StudyError(f"--out {folder} is a file, not a folder: choose a new folder for the study's results")
-    created = not folder.exists()
-    if not created:
+    if folder.exists():
         entries = sorted(p.name for p in folder.iterdir())
         if entries and "study.json" not in entries and LOCK_FILE not in entries:
             raise StudyError(f"--out {folder} holds files that no study wrote ({', '.join(entries[:3])}"
                              f"{', ...' if len(entries) > 3 else ''}): choose a new or empty folder")
+    created = []   # the folders this claim makes, deepest first
+    path = folder
+    while not os.path.lexists(path):
+        created.append(path)
+        path = path.parent
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
