@@ -168,6 +168,7 @@ class LoopbackCluster:
         from distributed import Client
 
         deadline = time.monotonic() + timeout
+        listed: set[str] = set()
         with Client(self.address, timeout=timeout) as client:
             while time.monotonic() < deadline:
                 listed = {str(w.get("name")) for w in client.scheduler_info()["workers"].values()}
