@@ -95,7 +95,7 @@ def client():
     from distributed import Client, LocalCluster
 
     cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=50)
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=50)
     c = Client(cluster)
     yield c
     c.close()
@@ -217,6 +217,27 @@ def test_ctrl_c_ends_the_study_with_130_and_keeps_the_rows(tmp_path, fmu_dir, pr
     wait_for(group_gone, "end of every process of the study's group", timeout=30)
     result = run_study(study, out, client=client, fmu_dir=fmu_dir, resume=True, progress=False)
     assert result.skipped == len(rows) and result.ran == 16 - len(rows)
+
+
+def test_ctrl_c_while_the_fmus_validate_the_study_waits_for_them(tmp_path, catalog):
+    """SIGINT while validate_study runs the FMUs in this process: the FMU calls are not disturbed
+    (a KeyboardInterrupt inside one would come back as "the FMU refused it"), and the interrupt
+    is raised once they are over."""
+    import threading
+
+    from cosim.apps.study.cluster import ctrl_c_deferred
+    from cosim.apps.study.runner import validate_study
+
+    study = load_study(write(tmp_path / "slow.toml", SLOW))
+    timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
+    validated = []
+    with pytest.raises(KeyboardInterrupt):
+        with ctrl_c_deferred():
+            timer.start()
+            validated.append(validate_study(study, catalog))   # 16 values on the FMUs: longer than 0.05 s
+            timer.join()   # the signal has arrived inside the block
+    assert validated == [["left", "right"]]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
 
 
 # -- --retry-failed ----------------------------------------------------------------------------------

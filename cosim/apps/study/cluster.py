@@ -132,16 +132,71 @@ def _sigint_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
-def local_cluster(n: int, timeout: float = WORKER_WAIT_S):
+class Interrupts:
+    """The Ctrl-C noted by :func:`ctrl_c_deferred`; :meth:`check` raises KeyboardInterrupt for it."""
+
+    def __init__(self):
+        self.noted = False
+
+    def note(self, signum, frame) -> None:
+        self.noted = True
+
+    def check(self) -> None:
+        if self.noted:
+            raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def ctrl_c_deferred() -> Iterator[Interrupts]:
+    """A Ctrl-C while the block runs takes effect between its steps (:meth:`Interrupts.check`)
+    or when it ends, never in the middle of a call that cannot be interrupted safely.
+
+    Two such places: the FMUs, which run their Python code in this interpreter and thread (a
+    KeyboardInterrupt raised inside an FMU call is caught by the FMU and comes back as an FMU
+    error, "the FMU refused it", or crashes the process), and Dask's start-up calls into its
+    event-loop thread (a local cluster interrupted while its workers register cannot be closed
+    any more: ``UnboundLocalError`` from ``distributed.utils.sync`` after 12 s).  The handler
+    only notes the Ctrl-C (main thread only; elsewhere a no-op).
+    """
+    interrupts = Interrupts()
+    if threading.current_thread() is not threading.main_thread():
+        yield interrupts
+        return
+    previous = signal.signal(signal.SIGINT, interrupts.note)
+    try:
+        yield interrupts
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    interrupts.check()
+
+
+def _wait_for_workers(client, n: int, timeout: float, poll) -> bool:
+    """Wait until the scheduler has ``n`` workers (True) or ``timeout`` s passed (False), calling
+    ``poll`` (e.g. :meth:`Interrupts.check`) between short questions to the scheduler."""
+    deadline = time.monotonic() + timeout
+    while len(client.scheduler_info()["workers"]) < n:
+        poll()
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def local_cluster(n: int, timeout: float = WORKER_WAIT_S, poll=lambda: None):
     """``(client, cluster)``: a ``LocalCluster`` of ``n`` worker processes, one thread each, whose
     workers never see a Ctrl-C.
 
     A Ctrl-C in a terminal sends SIGINT to the whole foreground process group, the local
     cluster's worker processes included: each would print its own KeyboardInterrupt traceback
     and die under the study.  An ignored signal stays ignored across ``exec`` and Python then
-    leaves it so; the workers are therefore spawned while this process ignores SIGINT, for the
-    few milliseconds until they exist (not while they import and register, 1-3 s), and only the
-    study's own process gets a Ctrl-C: it cancels the cases and stops the workers in order.
+    leaves it so; the workers are therefore spawned while this process ignores SIGINT, until
+    they exist (not while they import and register, 1-3 s), and only the study's own process
+    gets a Ctrl-C: it cancels the cases and stops the workers in order.  The price: a Ctrl-C
+    while the worker processes are spawned (milliseconds; up to a second on a loaded machine)
+    is lost, and must be pressed again.  (Blocking SIGINT instead does not keep it: the
+    interpreter's other threads, numpy's BLAS pool and the thread that starts multiprocessing's
+    resource tracker, do not block it, and the kernel hands it to one of them, which ignores
+    it.)  ``poll`` is called while the workers register (:func:`ctrl_c_deferred`).
     """
     import multiprocessing
 
@@ -160,7 +215,8 @@ def local_cluster(n: int, timeout: float = WORKER_WAIT_S):
             while len(multiprocessing.active_children()) < before + n and time.monotonic() < deadline:
                 time.sleep(0.005)
         client = Client(cluster)
-        client.wait_for_workers(n, timeout=timeout)
+        if not _wait_for_workers(client, n, timeout, poll):
+            raise StudyError(f"the local cluster's {n} workers did not start within {timeout:g} s")
     except BaseException:
         cluster.close()
         raise
@@ -168,7 +224,7 @@ def local_cluster(n: int, timeout: float = WORKER_WAIT_S):
 
 
 def connect(scheduler: str | None = None, workers: int | None = None,
-            timeout: float = CONNECT_TIMEOUT_S):
+            timeout: float = CONNECT_TIMEOUT_S, poll=lambda: None):
     """``(client, cluster)``: a ``distributed.Client`` to ``scheduler`` (``cluster`` None; a
     :class:`StudyError` after ``timeout`` s if it does not answer), or to a new local cluster
     (:func:`local_cluster`) of ``workers`` processes with one thread each (default: one per core)."""
@@ -185,18 +241,17 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     n = workers or os.cpu_count() or 1
     if n < 1:
         raise StudyError(f"--workers {workers}: needs at least 1 worker")
-    return local_cluster(n)
+    return local_cluster(n, poll=poll)
 
 
-def check_workers(client, wait_s: float = WORKER_WAIT_S) -> list[str]:
-    """Wait (at most ``wait_s``) for a first worker, then check every worker's environment
-    (:mod:`.environment`); raise :class:`StudyError` naming each worker that cannot run the
-    cases.  Returns the workers' addresses."""
-    try:
-        client.wait_for_workers(1, timeout=wait_s)
-    except TimeoutError:
-        raise StudyError(f"the Dask scheduler at {client.scheduler.address} has no worker, and none joined "
-                         f"within {wait_s:g} s: start workers (dask worker {client.scheduler.address})") from None
+def check_workers(client, wait_s: float = WORKER_WAIT_S, poll=lambda: None) -> list[str]:
+    """Wait (at most ``wait_s``, calling ``poll`` meanwhile) for a first worker, then check every
+    worker's environment (:mod:`.environment`); raise :class:`StudyError` naming each worker
+    that cannot run the cases.  Returns the workers' addresses."""
+    if not _wait_for_workers(client, 1, wait_s, poll):
+        address = client.scheduler.address
+        raise StudyError(f"the Dask scheduler at {address} has no worker, and none joined within {wait_s:g} s: "
+                         f"start workers (dask worker {address})")
     environments = worker_environments(client)
     bad = unfit(environments, __version__)
     if bad:
@@ -252,7 +307,8 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
     folder = Path(out) if out is not None else Path("out") / "studies" / study.name
     with claim_folder(folder) as claim:
         t0 = time.perf_counter()
-        buildings = _validate(study, fmu_dir)
+        with ctrl_c_deferred():   # the FMUs run in this process while the study is validated
+            buildings = _validate(study, fmu_dir)
         validation_s = time.perf_counter() - t0
         hashes = fmu_hashes(fmu_dir)
         header = columns_for(study, buildings)
@@ -267,18 +323,20 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
             t0 = time.perf_counter()
             own = client is None
             cluster = None
-            if own:
-                client, cluster = connect(scheduler, workers, connect_timeout)
             writer = None
             try:
-                fit_workers = check_workers(client, worker_wait)
-                n_workers = len(fit_workers)
+                with ctrl_c_deferred() as interrupts:   # Dask's start-up: a Ctrl-C between its steps
+                    if own:
+                        client, cluster = connect(scheduler, workers, connect_timeout, interrupts.check)
+                    fit_workers = check_workers(client, worker_wait, interrupts.check)
+                    n_workers = len(fit_workers)
+                    interrupts.check()
+                    retried = start_results(folder, fingerprint, recorded, retry_failed)
+                    claim.written = True
+                    writer = _RowWriter(folder / "results.csv", header)
+                    plugin = StudyPlugin(fmu_dir, hashes)
+                    client.register_plugin(plugin, name=plugin.name)
                 startup_s = time.perf_counter() - t0
-                retried = start_results(folder, fingerprint, recorded, retry_failed)
-                claim.written = True
-                writer = _RowWriter(folder / "results.csv", header)
-                plugin = StudyPlugin(fmu_dir, hashes)
-                client.register_plugin(plugin, name=plugin.name)
                 t1 = time.perf_counter()
                 try:
                     rows, failed, lost, unfit_workers = _execute(client, plugin.name, study, pending, writer,
@@ -292,7 +350,7 @@ def run_study(study: Study | str | Path, out: str | Path | None = None, *, worke
                 if writer is not None:
                     writer.close()
                     write_parquet(folder / "results.csv", folder / "results.parquet")
-                if own:
+                if own and client is not None:
                     _close(client, cluster, client.status != "running")
     if lost is not None:
         raise ClusterLost(f"{lost}: {len(rows)} of the {len(pending)} cases of this run finished and are in "
