@@ -52,7 +52,7 @@ def exit_code(exc: BaseException) -> int:
         return EXIT_FAILED if exc.function == "fmi2DoStep" else EXIT_BAD_INPUT
     if isinstance(exc, InstabilityError):   # the run went unphysical: nothing was written
         return EXIT_FAILED
-    if isinstance(exc, ClusterLost):   # the study's scheduler went away: its rows are kept (--resume)
+    if isinstance(exc, ClusterLost):   # a study's scheduler (or every able worker) went away: rows kept
         return EXIT_FAILED
     if isinstance(exc, (BadInput, SceneError, StudyError, CalibrationError, NotExpressibleError,
                         FileNotFoundError)):
@@ -149,7 +149,9 @@ def cmd_study_run(args) -> int:
         raise StudyError(f"--max-cases {args.max_cases}: needs at least 1 case")
     study = load_study(args.study, _overrides(args.fixed), max_cases=args.max_cases)
     if args.dry_run:
-        with Catalog(_fmu_dir(args.fmu_dir)) as catalog:
+        from .apps.study.cluster import ctrl_c_deferred
+
+        with ctrl_c_deferred(), Catalog(_fmu_dir(args.fmu_dir)) as catalog:   # the FMUs run here
             validate_study(study, catalog)
         print(f"{study.name}: {study.n_cases} cases of scene {study.scene}, varying "
               + " x ".join("(" + ", ".join(a.variables) + f": {len(a)})" for a in study.axes))
