@@ -40,7 +40,7 @@ def client():
     from distributed import Client, LocalCluster
 
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=40)
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=40)
     c = Client(cluster)
     yield c
     c.close()
