@@ -90,6 +90,9 @@ class BuildingState:
     E_damping: float = 0.0
     E_hysteretic: float = 0.0
     rk_step: float = 0.0      # Bouc-Wen: the last accepted Runge-Kutta step (s), the next first guess
+    # bilinear: the floor forces of the storeys' constant parts D' r (N), a cache of (mode, slip)
+    # cleared at every event (r does not depend on the slip of a yielding storey)
+    offset: np.ndarray | None = None
     # segments in which a peak may exceed ``peaks``, searched when the peaks are read
     # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
     pending: list = field(default_factory=list)
@@ -216,6 +219,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         super().__init__(building, hysteresis)
         self._configs: OrderedDict[bytes, Configuration] = OrderedDict()
         self.configurations_built = 0   # cost counter
+        # what a mode array implies, remembered for the array object last seen (a state's mode
+        # is replaced, never changed in place): (mode, configuration, elastic mask, any yielding)
+        self._mode_memo = None
         n = self.n
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
@@ -250,7 +256,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cfg = self._configs.get(key)
         if cfg is None:
             tangent = bilinear_tangent(self.k, self.alpha, mode) if self.hysteresis.inelastic else self.k
-            cfg = Configuration(self.masses, self.C, tangent)
+            cfg = Configuration(self.masses, self.C, tangent, elastic=not mode.any())
             if len(self._configs) >= MAX_CONFIGURATIONS:
                 self._configs.popitem(last=False)
             self._configs[key] = cfg
@@ -263,8 +269,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """``p = f - D' r``: external force minus the storeys' constant offsets (N)."""
         if not self.hysteresis.inelastic:
             return np.asarray(force, float)
-        r = bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode)
-        return force - _floor_forces(r)
+        if state.offset is None:
+            state.offset = _floor_forces(bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode))
+        return force - state.offset
+
+    def _mode_facts(self, mode: np.ndarray):
+        """``(mode, configuration, elastic mask, any storey yielding)`` of a mode array."""
+        memo = self._mode_memo
+        if memo is None or memo[0] is not mode:
+            elastic = mode == 0
+            memo = self._mode_memo = (mode, self.configuration(mode), elastic, not bool(elastic.all()))
+        return memo
 
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, state, times, ag, force) -> StepCost:
@@ -362,14 +377,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         inelastic = self.hysteresis.inelastic
         while length - s > xtol:
             rem = length - s
-            cfg = self.configuration(state.mode)
+            _, cfg, elastic, yielding = self._mode_facts(state.mode)
             p = self._net_force(state, force)
-            y = np.empty(3 * n + 2)
-            y[:n] = state.u
-            y[n:2 * n] = state.v
-            y[2 * n] = ag0 + ag1 * s
-            y[2 * n + 1] = ag1
-            y[2 * n + 2:] = p
+            y = np.concatenate((state.u, state.v, (ag0 + ag1 * s, ag1), p))
             w = y[2 * n:]
             z0 = y[:2 * n]
             segment = None
@@ -404,18 +414,20 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # strict (no tolerance): a segment cleared here records no end value
                 peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
                 if inelastic:
+                    # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
                     e0 = watched[n:2 * n] - state.slip
                     reach = bound[n:2 * n]
-                    elastic = state.mode == 0
-                    up_flags = elastic & (e0 + reach >= self.dy)
-                    down_flags = elastic & (e0 - reach <= -self.dy)
-                    unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
-                    quiet = not (up_flags.any() or down_flags.any() or unload_flags.any())
+                    margin = np.where(elastic, self.dy - np.abs(e0) - reach, state.mode * watched[3 * n:] - bound[3 * n:])
+                    quiet = bool(margin.min() > 0.0)
+                    if not quiet:
+                        up_flags = elastic & (e0 + reach >= self.dy)
+                        down_flags = elastic & (e0 - reach <= -self.dy)
+                        unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
                 else:
                     quiet = True
                 if quiet and not peak_flags.any():
                     cost.cleared += 1
-                    self._commit(state, z1, force, e_damp, e_in)
+                    self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
@@ -434,7 +446,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     segment = segment or ModalSegment(cfg, z0, w)
                     e_damp, e_in = cfg.energies(segment.q0, segment.beta0, segment.beta1, w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
-                self._commit(state, z1, force, e_damp, e_in)
+                self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
             if event is not None:
                 self._switch(state, event[1], event[2])
@@ -444,13 +456,15 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     break
         return events
 
-    def _commit(self, state, z1, force, e_damp, e_in):
+    def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
+        """End a segment at ``z1`` (a fresh array: the state keeps views of it).  ``yielding``
+        False: no storey yields in this segment (its hysteretic state stays)."""
         n = self.n
-        u1 = z1[:n].copy()
+        u1 = z1[:n]
         state.E_external += float(force @ (u1 - state.u))
         state.E_damping += e_damp
         state.E_input += e_in
-        if self.hysteresis.inelastic:
+        if yielding and self.hysteresis.inelastic:
             yielding = state.mode != 0
             if yielding.any():
                 d0 = _drift(state.u)
@@ -460,7 +474,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 state.E_hysteretic += float(np.sum(((1.0 - self.alpha) * self.fy * state.mode * (d1 - d0))[yielding]))
                 state.slip = np.where(yielding, d1 - state.mode * self.dy, state.slip)
         state.u = u1
-        state.v = z1[n:].copy()
+        state.v = z1[n:]
 
     def _switch(self, state, storey: int, kind: int):
         """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
@@ -472,6 +486,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         mode[storey] = kind
         state.mode = mode
         state.slip = slip
+        state.offset = None
 
     # -- events -------------------------------------------------------------------------------
     def _first_event(self, cfg, scan, state, y, rem, xtol, cost, up_flags=None, down_flags=None,

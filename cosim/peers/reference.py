@@ -219,6 +219,7 @@ class ReferenceResult:
     ductility: tuple[np.ndarray, ...] = ()
     residual_drifts: tuple[np.ndarray, ...] = ()
     hysteretic_energy_J: tuple[float, ...] = ()
+    yielding_buildings: tuple[int, ...] = ()      # indices of the buildings with yielding storeys
 
     @property
     def impacts(self) -> int:
@@ -742,6 +743,7 @@ class _Integration:
             ductility=tuple(storeys.of_building(mu, b) for b in range(nb)),
             residual_drifts=tuple(storeys.of_building(residual_end, b) for b in range(nb)),
             hysteretic_energy_J=tuple(float(e) for e in e_h),
+            yielding_buildings=tuple(storeys.yielding_buildings),
         )
 
 
