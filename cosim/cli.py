@@ -3,6 +3,7 @@
     pounding-cosim run [SCENE] [--set INSTANCE.VAR=VALUE ...] [--out DIR] ...   # default scene -> out/default/
     pounding-cosim list                                  # bundled scenes and studies
     pounding-cosim study STUDY [--workers N] [--resume] ...; pounding-cosim study plot RESULTS.csv --x ... --y ...
+    pounding-cosim study compare RESULTS.csv --x ... --pair ... --y ... --out DIR
     pounding-cosim calibrate --model crvk --m1 200 --m2 200 --k 1.8974e11 --v 10 --cr 0.4
     pounding-cosim report --out docs/reproduction [--quick]
     pounding-cosim accuracy SCENE [--out DIR]
@@ -190,6 +191,14 @@ def cmd_study_plot(args) -> int:
     return EXIT_OK
 
 
+def cmd_study_compare(args) -> int:
+    from .apps.study.compare import write_comparison
+
+    md, png = write_comparison(args.results, args.x, args.pair, args.panels, args.y, args.out)
+    print(f"table: {md}\nplot: {png}")
+    return EXIT_OK
+
+
 def cmd_calibrate(args) -> int:
     from .apps.calibrate import CalibrationError, calibrate, calibrate_stiffness, write_outputs
 
@@ -357,6 +366,15 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--logy", action="store_true", help="logarithmic y axis")
     p.add_argument("--out", type=Path, help="PNG file (default: next to the CSV)")
 
+    p = add("study-compare", cmd_study_compare, "two variants of a study side by side: comparison.md (table) and "
+                                                "comparison.png (also: study compare)")
+    p.add_argument("results", type=Path, help="results.csv of a study")
+    p.add_argument("--x", required=True, help="varied column on the abscissa, e.g. pounding.gap")
+    p.add_argument("--pair", required=True, help="varied column with the two variants, e.g. left.hysteresis")
+    p.add_argument("--panels", help="one row of panels per value of this column, e.g. ground.record")
+    p.add_argument("--y", nargs="+", required=True, help="summary columns, e.g. peak_force_N impacts")
+    p.add_argument("--out", type=Path, required=True, help="folder for comparison.md and comparison.png")
+
     from fmu_src.contact_laws import MODELS
 
     from .apps.calibrate import ZETA_MAX
@@ -410,9 +428,9 @@ def main(argv: Sequence[str] | None = None, prog: str | None = None) -> int:
     """Run one command; returns its exit code.  ``prog``: a shim's name (``python cosim/run.py``),
     whose first argument is then the command."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:2] == ["study", "plot"]:
-        argv = ["study-plot", *argv[2:]]
-        prog = f"{prog} plot" if prog else None
+    if argv[:2] in (["study", "plot"], ["study", "compare"]):
+        prog = f"{prog} {argv[1]}" if prog else None
+        argv = [f"study-{argv[1]}", *argv[2:]]
     parser, subs = build_parser()
     if prog and argv and argv[0] in subs:
         subs[argv[0]].prog = prog

@@ -24,7 +24,8 @@ STRING_COLUMNS = ("case_id", "status", "error", "worker")  # never read back as 
 CASE_COLUMNS = ("case_id", "case")
 SUMMARY_COLUMNS = ("status", "error", "peak_force_N", "impacts", "dissipated_energy_J", "max_penetration_m",
                    "peak_impact_velocity_m_s", "first_impact_s")
-BUILDING_COLUMNS = ("peak_displacement_m", "peak_drift_m", "peak_base_shear_N")
+BUILDING_COLUMNS = ("peak_displacement_m", "peak_drift_m", "peak_base_shear_N", "peak_ductility", "residual_drift_m",
+                    "hysteretic_energy_J")
 TAIL_COLUMNS = ("energy_input_J", "energy_residual_relative", "stop_time_s", "communication_steps", "rollbacks",
                 "wall_time_s", "case_time_s", "worker")
 
