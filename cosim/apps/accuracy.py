@@ -224,7 +224,8 @@ def score(row: Row, ref: dict[str, Any], peak_force: float, impacts: int, dissip
 
 
 def _final_storeys(result, name: str, variable: str, n: int) -> list[float]:
-    return [float(result[column(name, element_name(variable, i))][-1]) for i in range(1, n + 1)]
+    # the final read (every output), whatever the run recorded
+    return [result.value_at_end(column(name, element_name(variable, i))) for i in range(1, n + 1)]
 
 
 # -- runs ------------------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 
+from .models import storeys_are_linear
 from .names import column, element_name
 from .scene import SceneError
 
@@ -64,6 +65,8 @@ def recorded_columns(system: "System", record: str | Sequence[str] = "summary") 
         for b in system.buildings:
             out += building_columns(system, b.name, ("x", "E_kinetic", "E_strain", "E_damping", "E_hysteretic",
                                                      "E_input", "E_external"))
+            if not storeys_are_linear(b.spec):      # the storey loops (output.plot_storey_loops)
+                out += building_columns(system, b.name, ("drift", "V"))
         have = set(system.columns)
         for c in system.contacts:
             out += [x for x in (column(c.name, v) for v in ("F", "F_max", "delta", "E_dissipated", "impacts"))

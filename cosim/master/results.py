@@ -339,8 +339,9 @@ def final_energies(result: SimulationResult) -> dict[str, float]:
     initial = total(buildings, "E_kinetic", True) + total(buildings, "E_strain", True)
     e = dict(initial=initial, input=initial + total(buildings, "E_input"), kinetic=total(buildings, "E_kinetic"),
              strain=total(buildings, "E_strain"), damping=total(buildings, "E_damping"),
-             contact=total(contacts, "E_dissipated"), external=total(buildings, "E_external"))
-    e["residual"] = e["input"] - (e["kinetic"] + e["strain"] + e["damping"] + e["contact"])
+             contact=total(contacts, "E_dissipated"), external=total(buildings, "E_external"),
+             hysteretic=total(buildings, "E_hysteretic"))
+    e["residual"] = e["input"] - (e["kinetic"] + e["strain"] + e["damping"] + e["contact"] + e["hysteretic"])
     return e
 
 
@@ -458,7 +459,7 @@ def summarize(result: SimulationResult) -> Summary:
         energy_strain_J=e["strain"], energy_damping_J=e["damping"],
         energy_contact_J=e["contact"], energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
-        cost=result.cost, warnings=sampling_warnings(contacts), energy_hysteretic_J=float(e["hysteretic"][-1]))
+        cost=result.cost, warnings=sampling_warnings(contacts), energy_hysteretic_J=float(e["hysteretic"]))
 
 
 #: plain-law step / impact time scale above which a run's summary warns (energy error ~ ratio)
