@@ -39,7 +39,7 @@ def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
         assert asleep.onsets[c] == awake.onsets[c]
         assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-3)
         assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-3)
-    if asleep.stats["proofs"] == 0:
+    if asleep.scene.contacts and asleep.stats["proofs"] == 0:
         # yielding storeys: no proof that a gap stays open (cosim/master/gap_bound.py), nothing sleeps
         assert asleep.stats.get("dormant_steps", 0) == 0
         assert asleep.cost.communication_steps == awake.cost.communication_steps
