@@ -155,6 +155,7 @@ class HostObserver:
         self.internal = 0.0         # N s, impulse the resolver's own bodies received in the last step
         self.timing = 0.0           # N s, impulse delivered to the host minus received internally, this episode
         self.debt = 0.0             # J, energy the hand-over's timing gave the host this episode (_book_timing)
+        self.repaid = 0.0           # J, of it taken back this episode by impulse withheld (ImpactResolver._withhold)
         self.notices = []           # messages for the FMU log (drained by the adapter)
 
     def _set_kernel(self, kernel) -> None:
@@ -186,7 +187,7 @@ class HostObserver:
                 clean = dV
                 self.rows, self.edge_given_up = (), False
                 if self.internal == 0.0:        # the episode is over
-                    self.timing = self.debt = 0.0
+                    self.timing = self.debt = self.repaid = 0.0
             elif self.kernel is not None:
                 delivered = self._delivered(self.kernel, hits, hp)
                 clean = dV + delivered
@@ -223,6 +224,31 @@ class HostObserver:
         self.internal = internal
         self.predicted = self.structural_rate(h)
         self.predicted_position = 0.5 * self.a0 * h * h + self.a1 * h * h * h / 6.0
+
+    def owed(self) -> float:
+        """Energy [J] the hand-over's timing gave the host this episode and was not taken back."""
+        return self.debt - self.repaid
+
+    def projected_debt(self, emitted, internal, h: float) -> tuple[float, list[float]]:
+        """Energy [J] the timing will have given the host once the impulses ``emitted`` [N s]
+        (this step's first, then the next steps') have reached it, the resolver's own bodies
+        receiving ``internal`` [N s] in the same steps: the host delivering them with its
+        kernel, or the provisional one while it is unknown, the structures' acceleration as
+        predicted (``int C A dt``, :meth:`_book_timing`, continued over the coming steps);
+        and ``C`` [N s] at the start of each of those steps."""
+        kernel = self.delivery_kernel()
+        forces, C, debt, Cs = self.forces, self.timing, self.debt, []
+        for j, (J, I) in enumerate(zip(emitted, internal)):
+            Cs.append(C)
+            forces = (J / h,) + forces[:_KERNEL_TAPS - 1]
+            C1 = C + h * sum(w * F for w, F in zip(kernel, forces)) - I
+            debt += 0.5 * (C + C1) * (self.a0 + self.a1 * (j + 0.5) * h) * h
+            C = C1
+        return debt, Cs
+
+    def delivery_kernel(self) -> tuple[float, ...]:
+        """The host's kernel, or while it is unknown the standard one the edge fits best."""
+        return _padded(self.kernel if self.kernel is not None else self.provisional)
 
     def _book_timing(self, delivered: float, internal: float, clean: float) -> None:
         """Energy the hand-over's timing gave the host over one observed step (rule 7).
