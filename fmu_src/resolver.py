@@ -41,6 +41,10 @@ _MAX_SWITCHES_PER_STEP = 200
 #: energy the hand-over's timing may have given the host before it is taken back, as a part of
 #: the impact's kinetic energy m v_imp^2 (rule 7)
 _DEBT_TOLERANCE = 1e-4
+#: timing energy left to the host by ImpactResolver._withhold, as a part of m v_imp^2: 1 % of
+#: the impact's kinetic energy, the plausibility watch's limit (the projection it acts on is a
+#: prediction; below this the coarse-step error it would add is larger than what it takes back)
+_WITHHOLD_TOLERANCE = 0.001
 #: steps over which ImpactResolver._withhold continues the resolver's own impact and the host's
 #: delivery: the longest standard kernel (4 taps) after the last hand-over, and 2 more steps of impact
 _WITHHOLD_HORIZON = 6
@@ -244,7 +248,7 @@ class ImpactResolver:
                 shift = min(shift, self._probe(h, (lead + 1.0) * h) - target)
             target += shift
         emitted = max(internal + target - self.ahead, 0.0)
-        withheld = self._withhold(emitted, internal, h) if self.follow_host and self.observer.kernel is None else 0.0
+        withheld = self._withhold(emitted, internal, h) if self.follow_host and self.observer.untimed else 0.0
         self.ahead += emitted - internal
         emitted, internal = emitted - withheld, internal - withheld
         if not self.in_contact and target <= 0.0 and self.ahead > 0.0:
@@ -285,7 +289,7 @@ class ImpactResolver:
         rest = max(sum(future) - (self.ahead + emitted - internal), 0.0)
         emissions = [emitted, rest] + [0.0] * (len(future) - 1)
         debt, C = obs.projected_debt(emissions, [internal] + future, h)
-        excess = debt - obs.repaid - _DEBT_TOLERANCE * m * self.v_imp * self.v_imp
+        excess = debt - obs.repaid - _WITHHOLD_TOLERANCE * m * self.v_imp * self.v_imp
         if not excess > 0.0:
             return 0.0
         # the host's relative rate while it receives this step's impulse: the resolver's own
