@@ -424,5 +424,3 @@ class HostObserver:
             cx += (clean - used) * (self.clock - t_mid)
             self._learn(clean / hp, hp)
         return cx, cu
-
-
