@@ -108,7 +108,11 @@ class ImpactResolver:
        average (the kernel's mean delay) gets the impulse that much early, so that it acts on
        the host's structures when it acts on the resolver's own bodies; momentum is exact over
        an episode (``ahead``).  The energy a late hand-over gave the host (``int C A dt``,
-       :meth:`HostObserver._book_timing`) is taken back by shifting the next hand-over.
+       :meth:`HostObserver._book_timing`) is taken back by shifting the next hand-over.  In an
+       episode that began before the host's kernel was known (the first impact of a host that
+       declared nothing) what the timing will still give the host after the last hand-over is
+       projected and taken back by withholding impulse for good (:meth:`_withhold`): the host's
+       bodies separate a little slower; energy is taken rather than created.
 
     ``follow_host=False`` restores the free-mass model (``a_ext = 0``, no corrections).
     The instance holds only plain numbers, so ``copy.deepcopy`` saves its state.
@@ -266,15 +270,21 @@ class ImpactResolver:
         Before the first impact has shown the host's kernel the hand-over is timed for the
         provisional one, and a host later than that gains ``int C A dt`` (rule 7), mostly after
         the last impulse has been handed over, when no shift of the hand-over can take it back
-        (a Jacobi host at 10 ms: 8 % of the system's energy in the first 30 ms impact).  The
-        energy is projected to the end of the episode (:meth:`HostObserver.projected_debt`,
-        the resolver's own impact continued over the coming steps, what it has not handed
-        over yet handed over next step), and what exceeds the tolerance is taken back by
-        handing over ``dJ`` less: the host then separates ``dJ / m`` slower, which takes
-        ``w dJ - dJ^2 / (2 m)`` from its relative kinetic energy (``w`` the separation speed
-        of the resolver's own bodies).  A host whose timing the kernel matches gains nothing,
-        and nothing is withheld; the criterion is one-sided (energy created is forbidden, a
-        contact energy error is not), so the projection errs towards taking back.
+        (the two oscillators of the host matrix in HHT-alpha, Jacobi order, at 10 ms: 9 % of
+        the system's energy in a first impact of three steps).  Called only in such an episode
+        (``HostObserver.untimed``).  The energy is projected to the end of the episode
+        (:meth:`HostObserver.projected_debt`: the host timed as the latest standard host the
+        rows do not exclude, the resolver's own impact continued over the coming steps, what
+        it has not handed over yet handed over next step), and what exceeds the tolerance is
+        taken back by handing over ``dJ`` less: the host's relative rate is then ``dJ / m``
+        higher, which takes ``g dJ + dJ^2 / (2 m)`` from its relative kinetic energy, ``g``
+        the host's separation speed while it would have received ``dJ`` (the resolver's own
+        minus ``C / m``, weighted by the kernel).  A host the kernel times right gains
+        nothing, and nothing is withheld; the criterion is one-sided (energy created is
+        forbidden, a contact energy error within 15 % is allowed), so the projection errs
+        towards taking back.  The host's bodies receive ``dJ`` less relative impulse than the
+        resolver's own: their total momentum is unchanged (the force pair is equal and
+        opposite), and out of contact the host's state is the truth again (rule 2).
         """
         obs, m = self.observer, self.law.m
         if not emitted > 0.0:
