@@ -246,7 +246,7 @@ class HostObserver:
         """Energy [J] the timing will have given the host once the impulses ``emitted`` [N s]
         (this step's first, then the next steps') have reached it, the resolver's own bodies
         receiving ``internal`` [N s] in the same steps: the host delivering them with its
-        kernel, or the provisional one while it is unknown, the structures' acceleration as
+        kernel, or the suspect one while it is unknown, the structures' acceleration as
         predicted (``int C A dt``, :meth:`_book_timing`, continued over the coming steps);
         and ``C`` [N s] at the start of each of those steps."""
         kernel = self.delivery_kernel()
@@ -260,7 +260,8 @@ class HostObserver:
         return debt, Cs
 
     def delivery_kernel(self) -> tuple[float, ...]:
-        """The host's kernel, or while it is unknown the standard one the edge fits best."""
+        """The host's kernel, or while it is unknown the latest standard one the edges do not
+        exclude (``suspect``: the timing energy is booked for it)."""
         return _padded(self.kernel if self.kernel is not None else self.suspect)
 
     def _book_timing(self, delivered: float, internal: float, clean: float) -> None:
