@@ -298,8 +298,21 @@ class ImpactResolver:
             probe._advance(j * h, (j + 1) * h, probe.delta_end, probe.delta_dot_end, out)
             future.append(max(out.impulse, 0.0))
             rates.append(probe.delta_dot_end)
-        rest = max(sum(future) - (self.ahead + emitted - internal), 0.0)
-        emissions = [emitted, rest] + [0.0] * (len(future) - 1)
+        # the coming hand-overs as rule 7 times them: by the end of coming step j, what the own
+        # bodies receive up to ``lead`` steps later (the cumulative impulse interpolated linearly)
+        cumulative = [0.0]
+        for J in future:
+            cumulative.append(cumulative[-1] + J)
+        lead = min(obs.lead, float(len(future)))
+        handed = self.ahead + emitted - internal   # N s, handed over beyond the own bodies' so far
+        emissions = [emitted]
+        for j in range(1, len(future) + 1):
+            x = min(j + lead, float(len(future)))
+            i = min(int(x), len(future) - 1)
+            due = cumulative[i] + (x - i) * future[i] if x < len(future) else cumulative[-1]
+            emissions.append(max(due - handed, 0.0))
+            handed = max(handed, due)
+        emissions = emissions[:len(future)]
         debt, C = obs.projected_debt(emissions, [internal] + future, h)
         excess = debt - obs.repaid - _WITHHOLD_TOLERANCE * m * self.v_imp * self.v_imp
         if not excess > 0.0:
