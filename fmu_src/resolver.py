@@ -275,16 +275,16 @@ class ImpactResolver:
         (the two oscillators of the host matrix in HHT-alpha, Jacobi order, at 10 ms: 9 % of
         the system's energy in a first impact of three steps).  Called only in such an episode
         (``HostObserver.untimed``).  The energy is projected to the end of the episode
-        (:meth:`HostObserver.projected_debt`: the host timed as the latest standard host the
-        rows do not exclude, the resolver's own impact continued over the coming steps, what
-        it has not handed over yet handed over next step), and what exceeds the tolerance is
+        (:meth:`HostObserver.projected_debt`: the host timed as the standard host the rows fit
+        best, the resolver's own impact continued over the coming steps and handed over as
+        rule 7 times it), and what exceeds the tolerance is
         taken back by handing over ``dJ`` less: the host's relative rate is then ``dJ / m``
         higher, which takes ``g dJ + dJ^2 / (2 m)`` from its relative kinetic energy, ``g``
         the host's separation speed while it would have received ``dJ`` (the resolver's own
         minus ``C / m``, weighted by the kernel).  A host the kernel times right gains
-        nothing, and nothing is withheld; the criterion is one-sided (energy created is
-        forbidden, a contact energy error within 15 % is allowed), so the projection errs
-        towards taking back.  The host's bodies receive ``dJ`` less relative impulse than the
+        nothing, and nothing is withheld; where the projection is off the host loses some
+        contact energy instead (the criterion is one-sided: energy created is forbidden, a
+        contact energy error within 15 % is allowed).  The host's bodies receive ``dJ`` less relative impulse than the
         resolver's own: their total momentum is unchanged (the force pair is equal and
         opposite), and out of contact the host's state is the truth again (rule 2).
         """
