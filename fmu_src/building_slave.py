@@ -32,6 +32,14 @@ from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64
+# Parameter bounds: generous beyond any building (a storey of the tallest tower is ~1e7 kg and
+# 1e10 N/m, periods stay below 10 s), and tight enough that the eigenproblem and the matrix
+# exponential stay in double precision: m = 1e-300 kg made LAPACK fail, m = 1e300 kg and
+# T1 = 1e300 s (stiffnesses scaled to 0) overflowed or underflowed the matrices.
+M_MIN, M_MAX = 1e-6, 1e12       # kg
+K_MAX = 1e15                    # N/m
+T1_MAX = 100.0                  # s
+X0_MAX, V0_MAX = 1e3, 1e3       # m, m/s
 # Default storey stiffness: 1e5 kg * (2 pi / 0.5 s)^2, i.e. the default 1-storey building has T1 = 0.5 s.
 _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 
@@ -44,16 +52,18 @@ class Building(Fmi2Slave):
     VARIABLES = (
         Variable("n_storeys", "Integer", start=1, low=1, high=N_MAX,
                  description=f"number of storeys used (capacity {N_MAX})"),
-        *array("m", N_MAX, start=1e5, unit="kg", low=0.0, low_open=True, description="floor mass"),
-        *array("k", N_MAX, start=_K_DEFAULT, unit="N/m", low=0.0,
+        *array("m", N_MAX, start=1e5, unit="kg", low=M_MIN, high=M_MAX, description="floor mass"),
+        *array("k", N_MAX, start=_K_DEFAULT, unit="N/m", low=0.0, high=K_MAX,
                description="storey stiffness between floor i-1 and i (scaled if T1 > 0)"),
-        Variable("T1", start=0.0, unit="s", low=0.0,
+        Variable("T1", start=0.0, unit="s", low=0.0, high=T1_MAX,
                  description="fundamental period the stiffnesses are scaled to; 0 = use k as given"),
         Variable("zeta", start=0.05, low=0.0, high=1.0, high_open=True, description="viscous damping ratio"),
         Variable("damping", "String", start="rayleigh", choices=DAMPING_MODELS,
                  description="damping model: rayleigh (modes 1 and 2) or modal (every mode)"),
-        *array("x0", N_MAX, start=0.0, unit="m", description="initial floor displacement relative to the ground"),
-        *array("v0", N_MAX, start=0.0, unit="m/s", description="initial floor velocity relative to the ground"),
+        *array("x0", N_MAX, start=0.0, unit="m", low=-X0_MAX, high=X0_MAX,
+               description="initial floor displacement relative to the ground"),
+        *array("v0", N_MAX, start=0.0, unit="m/s", low=-V0_MAX, high=V0_MAX,
+               description="initial floor velocity relative to the ground"),
         Variable("ag", causality="input", start=0.0, unit="m/s2",
                  description="ground acceleration, held constant over the step"),
         *array("F", N_MAX, causality="input", start=0.0, unit="N",
@@ -125,15 +135,23 @@ class Building(Fmi2Slave):
         Everything a step needs is one matrix-vector product and three dot products.
         """
         b, n = self._building, self._n
-        prop = ZohPropagator(b, h)
-        S = prop.step_matrix                       # [u1; v1] = S y
-        Su = S[:n]
-        accel = self._R @ S
-        accel[:, 2 * n + 1:] += np.diag(1.0 / b.masses)
-        D = np.eye(n) - np.eye(n, k=-1)            # drift = D u
-        du = Su - np.eye(n, 3 * n + 1)
-        G = np.vstack([S, accel, D @ Su, du, b.masses @ du, prop.damping_form,
-                       np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflow is refused below, in one message
+            prop = ZohPropagator(b, h)
+            S = prop.step_matrix                       # [u1; v1] = S y
+            Su = S[:n]
+            accel = self._R @ S
+            accel[:, 2 * n + 1:] += np.diag(1.0 / b.masses)
+            D = np.eye(n) - np.eye(n, k=-1)            # drift = D u
+            du = Su - np.eye(n, 3 * n + 1)
+            G = np.vstack([S, accel, D @ Su, du, b.masses @ du, prop.damping_form,
+                           np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
+        if not np.isfinite(G).all():
+            # the block exponential (and Van Loan's damping integral, which grows like
+            # exp(2 zeta w h)) overflows: no step of this length can be computed
+            fastest = float(np.max(b.omegas))
+            raise SlaveError(f"a step of h = {h!r} s is beyond what the building's arithmetic supports (its step "
+                             f"matrix overflows; fastest mode {fastest:.3g} rad/s, zeta = {b.damping_ratio:g}); "
+                             f"use a shorter step")
         if len(self._steps) >= _MAX_CACHED_STEPS:
             self._steps.pop(next(iter(self._steps)))
         G = self._steps[h] = np.ascontiguousarray(G)
@@ -162,15 +180,29 @@ class Building(Fmi2Slave):
         y[2 * n + 1:] = f
         w = G @ y
         i = 4 * n
+        j = i + n + 1
+        k = j + 3 * n + 1
+        d_external = float(f @ w[i:i + n])
+        d_input = -ag * float(w[i + n])
+        d_damping = float(y @ w[j:k])
+        kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
+        strain = 0.5 * float(w[k + n:] @ w[k + n:])
+        # a non-finite displacement or velocity makes one of these non-finite (each is a sum of
+        # squares or products of them): refuse before anything changes
+        if not math.isfinite(kinetic + strain + d_damping + d_input + d_external):
+            raise SlaveError(f"a step of h = {step_size!r} s with ag = {ag!r} m/s2 would leave the building's "
+                             f"state not finite: the inputs or the step are beyond what its arithmetic supports "
+                             f"(nothing was changed)")
         self.x[:n] = w[:n]
         self.v[:n] = w[n:2 * n]
         self.a[:n] = w[2 * n:3 * n]
         self.drift[:n] = w[3 * n:i]
         self.base_shear = float(self._building.stiffnesses[0] * w[0])
-        self.E_external += float(f @ w[i:i + n])
-        self.E_input -= ag * float(w[i + n])
-        j = i + n + 1
-        k = j + 3 * n + 1
-        self.E_damping += float(y @ w[j:k])
-        self.E_kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
-        self.E_strain = 0.5 * float(w[k + n:] @ w[k + n:])
+        self.E_external += d_external
+        self.E_input += d_input
+        self.E_damping += d_damping
+        self.E_kinetic = kinetic
+        self.E_strain = strain
+
+    def _step_outputs_problem(self) -> str | None:
+        return None   # step() refuses a non-finite state before committing it
