@@ -231,6 +231,8 @@ class SlaveBase(Fmi2Slave):
         self._error: str | None = None
         self._initialized = False            # True after fmi2ExitInitializationMode succeeded
         self._saved = _SavedStates()
+        # pythonfmu looks _set_fmu_state up on the instance: the checks run first (see there)
+        self._set_fmu_state = self._checked_set_state
         # (variable, attribute, index) triples, resolved once: do_step runs thousands of times
         self._real_inputs: list[tuple[Variable, str, int | None]] = []
         self._real_outputs: list[tuple[Variable, str, int | None]] = []
@@ -271,7 +273,7 @@ class SlaveBase(Fmi2Slave):
         attr = var.attribute
         if idx is None:
             setattr(self, attr, var.start)
-            getter = None
+            getter = self._scalar_getter(attr)
             setter = None
         else:
             getattr(self, attr)[idx] = var.start
@@ -285,6 +287,11 @@ class SlaveBase(Fmi2Slave):
                 start=None if output else var.start),
             nested=False,
         )
+
+    def _scalar_getter(self, attr: str) -> Callable[[], Any] | None:
+        """Getter of a scalar variable; None = pythonfmu reads the attribute.  A subclass may
+        return a function that computes an output when it is read."""
+        return None
 
     def _element_getter(self, attr: str, idx: int) -> Callable[[], Any]:
         return lambda: getattr(self, attr)[idx]
@@ -476,12 +483,20 @@ class SlaveBase(Fmi2Slave):
             state[attr] = copy.deepcopy(getattr(self, attr))
         return self._saved.add(state)
 
-    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+    def _checked_set_state(self, state: dict[str, Any]) -> None:
+        """What pythonfmu calls for fmi2SetFMUstate (an instance attribute named ``_set_fmu_state``,
+        set in ``__init__``, so that the call always reaches this frame first, at the depth
+        :meth:`_SavedStates.check` counts with, whatever a subclass overrides): refuse a state
+        freed or foreign, then restore it (:meth:`_set_fmu_state`)."""
         problem = self._saved.check(passed=state)
         if problem:
             self._refuse(f"{self.instance_name}: {problem}", disable=False)
         if not self._saved.holds(state):
             self._refuse(f"{self.instance_name}: fmi2SetFMUstate with a state that was freed (fmi2FreeFMUstate) "
                          f"or was not saved by this instance", disable=False)
+        type(self)._set_fmu_state(self, state)
+
+    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        """Restore a saved state (a subclass may extend it; the checks are in :meth:`_checked_set_state`)."""
         for attr, value in state.items():
             setattr(self, attr, copy.deepcopy(value))
