@@ -33,6 +33,7 @@ E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kineti
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -306,10 +307,20 @@ class Building(Fmi2Slave):
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
                                  "ag held over the step (n_knots = 0)")
             times, values = knots
+        state = self._state
+        # what to restore if the step is refused: the integrators replace the state's fields,
+        # never change them in place, except the list of deferred peak searches
+        before = copy.copy(state)
+        before.pending = list(state.pending)
         try:
-            cost = self._integrator.advance(self._state, times, values, f)
+            cost = self._integrator.advance(state, times, values, f)
         except ValueError as exc:
-            raise SlaveError(str(exc)) from None
+            self._state = before
+            raise SlaveError(f"{exc} (nothing was changed)") from None
+        if not math.isfinite(float(state.u.sum()) + float(state.v.sum())):
+            self._state = before
+            raise SlaveError(f"a step of h = {step_size!r} s would leave the building's state not finite: the "
+                             f"inputs or the step are beyond what its arithmetic supports (nothing was changed)")
         self._count(cost)
         self._publish(f)
 
@@ -381,12 +392,7 @@ class Building(Fmi2Slave):
         self._derived_cache = None
 
     def _step_outputs_problem(self) -> str | None:
-        # the linear step refuses a non-finite state before committing it (_linear_step); the
-        # yielding storeys' integrators are checked here, on the state (one sum of each vector)
-        state = self._state
-        if state is None or math.isfinite(float(state.u.sum()) + float(state.v.sum())):
-            return None
-        return super()._step_outputs_problem()
+        return None   # step() refuses a non-finite state before committing it (both paths)
 
     def _free_mass_peaks(self, ag: float, force: float, h: float) -> None:
         """In-step peaks of a free mass: u(s) = u0 + v0 s + acc s^2 / 2 with acc = F/m - ag."""

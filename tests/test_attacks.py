@@ -522,16 +522,46 @@ class Raw:
         self.fmu.freeInstance()
 
 
-def test_building_refuses_a_step_its_arithmetic_cannot_take(fmu_path):
+@pytest.mark.parametrize("hysteresis, fragments", [
+    ("linear", ("h = 1000000.0 s", "arithmetic")),               # the step matrix overflows
+    ("bilinear", ("segment of 1e+06 s", "limit is 4096")),       # quadrature chunks of the fastest mode
+    ("bouc_wen", ("step of 1e+06 s", "limit is 8192")),          # ran for minutes before
+])
+def test_building_refuses_a_step_its_arithmetic_cannot_take(fmu_path, hysteresis, fragments):
     b = Raw(fmu_path("building"))
-    b.start(**{"x0[1]": 0.01})
+    b.fmu.setupExperiment(startTime=0.0)
+    b.fmu.enterInitializationMode()
+    b.fmu.setString([b.vr["hysteresis"]], [hysteresis])
+    b.fmu.setReal([b.vr["x0[1]"], b.vr["Fy[1]"]], [0.01, 1e6])   # yield drift 0.063 m: starts elastic
+    b.fmu.exitInitializationMode()
     assert b.status_of(b.fmu.doStep, 0.0, 0.01) == 0
-    before = b.fmu.getReal([b.vr["x[1]"], b.vr["v[1]"]])
+    watched = [b.vr[name] for name in ("x[1]", "v[1]", "E_damping", "x_peak[1]")]
+    before = b.fmu.getReal(watched)
+    t0 = time.perf_counter()
     assert b.status_of(b.fmu.doStep, 0.01, 1e6) == 2          # fmi2Discard, with the reason logged
-    assert any("h = 1000000.0 s" in m and "arithmetic" in m for m in b.errors()), b.log
-    assert b.fmu.getReal([b.vr["x[1]"], b.vr["v[1]"]]) == before and np.isfinite(before).all()   # unchanged
+    assert time.perf_counter() - t0 < REFUSAL_S
+    assert any(all(f in m for f in fragments) and "shorter step" in m for m in b.errors()), b.log
+    assert b.fmu.getReal(watched) == before and np.isfinite(before).all()   # nothing changed
     assert b.status_of(b.fmu.doStep, 0.01, 0.01) == 0         # and the instance goes on
     b.close()
+
+
+def test_bouc_wen_work_per_step_is_bounded(monkeypatch):
+    """The Runge-Kutta budget of one communication step is enforced (here lowered to 10 steps,
+    which a 1 s step of a 0.5 s building needs 30 of) and named in the refusal."""
+    from fmu_src import building_response
+    from fmu_src.hysteresis import StoreyHysteresis
+    from fmu_src.shear_building import ShearBuilding
+
+    building = ShearBuilding(np.full(3, 1e5), np.full(3, 1.579e7), 0.05, "rayleigh")
+    integrator = building_response.integrator_for(
+        building, StoreyHysteresis("bouc_wen", np.full(3, 1e6), 0.05, 2.0, 0.5, 0.5))
+    state = integrator.initial_state(np.zeros(3), np.zeros(3), np.zeros(3))
+    monkeypatch.setattr(building_response, "BOUC_WEN_MAX_RK_STEPS", 10)
+    with pytest.raises(ValueError, match="more than 10 Runge-Kutta steps in one step of 1 s"):
+        integrator.advance(state, (0.0, 1.0), (3.0, -3.0), np.zeros(3))
+    monkeypatch.setattr(building_response, "BOUC_WEN_MAX_RK_STEPS", 1000)
+    assert integrator.advance(state, (0.0, 1.0), (3.0, -3.0), np.zeros(3)).rk_steps > 10
 
 
 def test_bad_parameters_are_refused_at_exit_initialization(fmu_path):
