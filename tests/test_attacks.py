@@ -15,8 +15,10 @@ every one of them must have:
 Most cases run the command line in a child process (what a user runs: exit code, standard
 error, signals, a private read-only or tiny filesystem); fast ones in this process.  Cases that
 belong to other work in progress (the study application, issue 14's study items; record files,
-issue 14's record items) are marked ``xfail(strict=True)`` until that work is on ``main``: then
-they pass, the strict mark fails, and the mark is removed.
+issue 14's record items) are marked ``xfail(strict=True)`` while that work is not in this tree,
+detected by what the issue asks for (the study command's ``--retry-failed``; a declared bound on
+the ground motion's ``target_pga``): once it lands the mark falls away by itself and the cases
+must pass.
 """
 from __future__ import annotations
 
@@ -42,8 +44,27 @@ REFUSAL_S = 5.0
 #: loaded 2-core machine; the test fails only if the state is never reached
 WAIT_S = 60.0
 
-H16 = pytest.mark.xfail(strict=True, reason="study items of issue 14: H16's work, not yet on main")
-H15 = pytest.mark.xfail(strict=True, reason="record items of issue 14: H15's work (branch h15), not yet on main")
+
+
+def _study_items_present() -> bool:
+    """The study command has issue 14's ``--retry-failed`` (H16's study work is in this tree)."""
+    from cosim.cli import build_parser
+
+    study = build_parser()[1]["study"]
+    return any("--retry-failed" in action.option_strings for action in study._actions)
+
+
+def _record_items_present() -> bool:
+    """The ground motion declares an upper bound on ``target_pga`` (H15's record work is in this tree)."""
+    from fmu_src.ground_motion_slave import GroundMotion
+
+    return next(v for v in GroundMotion.VARIABLES if v.name == "target_pga").high is not None
+
+
+H16 = pytest.mark.xfail(not _study_items_present(), strict=True,
+                        reason="study items of issue 14: H16's work, not yet in this tree")
+H15 = pytest.mark.xfail(not _record_items_present(), strict=True,
+                        reason="record items of issue 14: H15's work, not yet in this tree")
 
 
 # -- helpers ---------------------------------------------------------------------------------------
@@ -197,12 +218,84 @@ def test_readme_example_does_not_replace_earlier_results(tmp_path, quick):
     assert snapshot(tmp_path / "out") == before and debris(tmp_path / "out") == []
 
 
+#: a study of 3 x NUM quick cases (one impact of two free masses each; 12 cases took about 20 s
+#: with one worker on a loaded 2-core machine, Dask's start included)
+SMALL_STUDY = """name = "attack"
+scene = "single_impact"
+[set]
+"pounding.gap" = 0.0
+stop_time = 0.015
+[vary]
+"pounding.CR" = [0.4, 0.65, 0.9]
+[[zip]]
+"left.v0[1]" = { start = 0.5, stop = 10.0, num = NUM }
+"right.v0[1]" = { start = -0.5, stop = -10.0, num = NUM }
+"""
+
+
+def start_study(tmp_path: Path, fmu_dir: Path, out: Path, num: int = 4, *extra: str) -> subprocess.Popen:
+    """``study`` in a child process of its own process group (its Dask workers with it, so that
+    :func:`stop` ends them all)."""
+    study = tmp_path / "attack.toml"
+    study.write_text(SMALL_STUDY.replace("NUM", str(num)))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "cosim.cli", "study", str(study), "--out", str(out), "--workers",
+                             "1", "--fmu-dir", str(fmu_dir), "--no-progress", *extra], cwd=tmp_path, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """Kill a study child and its workers if it is still running."""
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def study_rows(out: Path) -> list[str]:
+    """The case ids of the complete rows of ``out/results.csv``."""
+    path = out / "results.csv"
+    if not path.exists():
+        return []
+    import csv
+
+    rows = list(csv.reader(path.read_text().splitlines()))
+    return [row[0] for row in rows[1:] if len(row) == len(rows[0])]   # a torn last line is left out
+
+
+def wait_for_rows(out: Path, proc: subprocess.Popen, count: int) -> None:
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline and proc.poll() is None and len(study_rows(out)) < count:
+        time.sleep(0.05)
+    assert len(study_rows(out)) >= count and proc.poll() is None, "the study never wrote its first rows"
+
+
 @H16
 def test_two_resumes_of_one_study_at_once(tmp_path, fmu_dir):
-    """Two ``study --resume`` on one folder: the second is refused naming the holder of the lock."""
-    from cosim.apps.study import study_lock   # noqa: F401 - H16's lock
-
-    raise AssertionError("covered by H16's own test once the lock exists")
+    """A second writer of a study folder (``--resume`` while the first still writes) is refused
+    with one line naming the holder, and no case is written twice (before: 70 rows for 40
+    cases, 30 duplicates).  60 cases: the first still runs when the second has started (Dask's
+    start takes up to 20 s here); it is then interrupted, which keeps its finished rows."""
+    out = tmp_path / "study"
+    first = start_study(tmp_path, fmu_dir, out, 20)
+    second = None
+    try:
+        wait_for_rows(out, first, 1)
+        second = start_study(tmp_path, fmu_dir, out, 20, "--resume")
+        # refused at once; 30 s would allow a lock taken only after Dask's start (up to 20 s
+        # here): a second writer still running then is writing the same cases
+        try:
+            out_text, err_text = second.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            raise AssertionError("the second writer of the study folder was not refused within 30 s") from None
+        one_line(Done(second.returncode, out_text, err_text, 0.0), 2, str(first.pid))
+        first.send_signal(signal.SIGINT)
+        first.communicate(timeout=WAIT_S)
+    finally:
+        stop(first)
+        if second is not None:
+            stop(second)
+    rows = study_rows(out)
+    assert rows and len(rows) == len(set(rows)), rows
 
 
 # -- unbounded work or memory ----------------------------------------------------------------------
@@ -465,9 +558,22 @@ def test_ctrl_c_ends_with_interrupted_and_writes_nothing(tmp_path, fmu_dir, comm
     assert not parent.exists() or sorted(parent.iterdir()) == [], done   # nothing written, no debris
 
 
-@H16
 def test_ctrl_c_in_a_study_keeps_the_finished_rows(tmp_path, fmu_dir):
-    raise AssertionError("H16: Ctrl-C in a study ends with 'interrupted', exit 130, no traceback")
+    """Ctrl-C while a study runs its cases: 'interrupted', exit 130, no traceback, and the rows
+    finished before it stay.  (Ctrl-C while Dask starts, where the tornado NameError came from,
+    depends on timing within the start-up: the study's own tests.)"""
+    out = tmp_path / "study"
+    proc = start_study(tmp_path, fmu_dir, out)
+    try:
+        wait_for_rows(out, proc, 2)
+        done_before = study_rows(out)
+        proc.send_signal(signal.SIGINT)
+        out_text, err_text = proc.communicate(timeout=WAIT_S)
+    finally:
+        stop(proc)
+    one_line(Done(proc.returncode, out_text, err_text, 0.0), 130, prefix="interrupted")
+    rows = study_rows(out)
+    assert set(done_before) <= set(rows) and len(rows) == len(set(rows)), (done_before, rows)
 
 
 @H16
