@@ -46,7 +46,8 @@ MAX_REFINED_STEPS_PER_IMPACT = {True: 500, False: 20_000}   # by resolve_impacts
 #: :data:`SUBSTEPS_PER_STEP` per communication step.  A resolved impact takes 40-90 internal
 #: steps on every bundled scene (at most 16 in one doStep, measured); 5000 is 55 times the
 #: most, an impact law whose in-step integration has become stiff or chatters (crvk at
-#: CR 0.001: 600-700 per doStep while the floors stick together, for seconds).
+#: CR 0.001 chattered at 600-700 per doStep while the floors stuck together, for seconds, before the
+#: in-step resolver of issue 13; it now completes, and this bound stays the master's own protection).
 MAX_SUBSTEPS_PER_IMPACT = 5_000
 #: Internal steps per communication step a lasting contact may take without counting against
 #: :data:`MAX_SUBSTEPS_PER_IMPACT` (four times the most seen in one doStep on the bundled scenes).
