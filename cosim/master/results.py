@@ -11,17 +11,18 @@ calibration read these fields; none re-derives them.  Writing them to files is
 Energy balance (J), from the outputs of the FMUs alone::
 
     E_initial + sum_buildings E_input(t)
-        = sum_buildings (E_kinetic + E_strain + E_damping)(t)
+        = sum_buildings (E_kinetic + E_strain + E_damping + E_hysteretic)(t)
           + sum_contacts (E_dissipated + E_stored)(t) + residual(t)
 
 ``E_initial`` is the mechanical energy the system starts with (the buildings' x0, v0 and
 any contact closed at t = 0), ``E_input`` the work of the ground motion on the relative
-motion, ``E_stored = k delta^(n+1) / (n+1)`` the elastic energy of a contact spring closed at
-t (``delta`` > 0, the contact's own output; zero once it opens: a run that ends during an
-impact holds that energy in the spring, which is not a residual).  The residual is the
-coupling's error: the work the buildings receive from the mean contact forces minus what
-the contact FMUs account for.  ``energy_residual_relative`` divides by
-``E_initial + E_input`` at the end.
+motion, ``E_strain`` the elastic (stored) part of the storeys' energy, ``E_hysteretic`` what
+yielding storeys dissipated (0 for linear storeys), ``E_stored = k delta^(n+1) / (n+1)`` the
+elastic energy of a contact spring closed at t (``delta`` > 0, the contact's own output; zero
+once it opens: a run that ends during an impact holds that energy in the spring, which is not
+a residual).  The residual is the coupling's error: the work the buildings receive from the
+mean contact forces minus what the contact FMUs account for.  ``energy_residual_relative``
+divides by ``E_initial + E_input`` at the end.
 """
 from __future__ import annotations
 
@@ -123,7 +124,16 @@ class ContactSummary:
 
 @dataclass(frozen=True)
 class BuildingSummary:
-    """One building over a run: peak floor displacement (and where, when), peak drift, base shear."""
+    """One building over a run: peak floor displacement (and where, when), peak drift, base shear;
+    and its storeys' inelastic demand (``building.fmu``'s outputs at the end of the run):
+
+    * ``hysteresis``: the storey law (``linear``, ``bilinear``, ``bouc_wen``);
+    * ``peak_ductility``: the largest ``mu[i]``, peak drift (located inside the steps) over the
+      yield drift ``Fy[i] / k[i]``, and its storey; None when the building has no yield shear;
+    * ``residual_drift_m``: the storey drift's plastic part ``drift_residual[i]`` at the end of
+      largest magnitude (signed, m), and its storey; 0 for linear storeys;
+    * ``hysteretic_energy_J``: energy dissipated by yielding (``E_hysteretic``).
+    """
 
     n_storeys: int
     peak_displacement_m: float
@@ -132,12 +142,26 @@ class BuildingSummary:
     peak_drift_m: float
     peak_drift_storey: int
     peak_base_shear_N: float
+    hysteresis: str = "linear"
+    peak_ductility: float | None = None
+    peak_ductility_storey: int | None = None
+    residual_drift_m: float = 0.0
+    residual_drift_storey: int | None = None
+    hysteretic_energy_J: float = 0.0
+
+    @property
+    def yields(self) -> bool:
+        """True for a building with yielding storeys (bilinear or Bouc-Wen)."""
+        return self.hysteresis != "linear"
 
     def to_dict(self) -> dict[str, Any]:
         return dict(n_storeys=self.n_storeys, peak_displacement_m=self.peak_displacement_m,
                     peak_displacement_floor=self.peak_displacement_floor,
                     peak_displacement_time_s=self.peak_displacement_time_s, peak_drift_m=self.peak_drift_m,
-                    peak_drift_storey=self.peak_drift_storey, peak_base_shear_N=self.peak_base_shear_N)
+                    peak_drift_storey=self.peak_drift_storey, peak_base_shear_N=self.peak_base_shear_N,
+                    hysteresis=self.hysteresis, peak_ductility=self.peak_ductility,
+                    peak_ductility_storey=self.peak_ductility_storey, residual_drift_m=self.residual_drift_m,
+                    residual_drift_storey=self.residual_drift_storey, hysteretic_energy_J=self.hysteretic_energy_J)
 
 
 @dataclass(frozen=True)
@@ -168,6 +192,7 @@ class Summary:
     warnings: list[str] = field(default_factory=list)
     #: elastic energy held by contacts closed at the end (J), see the module docstring
     energy_contact_stored_J: float = 0.0
+    energy_hysteretic_J: float = 0.0
 
     @property
     def max_penetration_m(self) -> float:
@@ -196,7 +221,7 @@ class Summary:
             energy_initial_J=self.energy_initial_J, energy_input_J=self.energy_input_J,
             energy_kinetic_J=self.energy_kinetic_J, energy_strain_J=self.energy_strain_J,
             energy_damping_J=self.energy_damping_J, energy_contact_J=self.energy_contact_J,
-            energy_contact_stored_J=self.energy_contact_stored_J,
+            energy_contact_stored_J=self.energy_contact_stored_J, energy_hysteretic_J=self.energy_hysteretic_J,
             energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
         out.update(self.cost.to_dict())
         out["warnings"] = list(self.warnings)
@@ -265,8 +290,9 @@ def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
     initial = kinetic[0] + strain[0] + stored[0]
     terms = dict(time=result.time, input=initial + total(buildings, "E_input"), kinetic=kinetic, strain=strain,
                  damping=total(buildings, "E_damping"), contact=total(contacts, "E_dissipated"), stored=stored,
-                 external=total(buildings, "E_external"))
-    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"] + stored)
+                 external=total(buildings, "E_external"), hysteretic=total(buildings, "E_hysteretic"))
+    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"] + stored
+                                          + terms["hysteretic"])
     return terms
 
 
@@ -296,15 +322,40 @@ def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
         peak_impact_velocity_m_s=v_impact)
 
 
+def _final_row(result: SimulationResult, name: str, variable: str, n: int) -> np.ndarray | None:
+    """``variable[1..n]`` of instance ``name`` at the end of the run (None if not recorded)."""
+    columns = [column(name, element_name(variable, i)) for i in range(1, n + 1)]
+    if not all(result.has(c) for c in columns):
+        return None
+    return np.array([result[c][-1] for c in columns])
+
+
 def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSummary:
     x = np.abs(np.column_stack([result[column(name, element_name("x", i))] for i in range(1, n + 1)]))
     d = np.abs(np.column_stack([result[column(name, element_name("drift", i))] for i in range(1, n + 1)]))
     kx, fx = np.unravel_index(np.argmax(x), x.shape)
     kd, fd = np.unravel_index(np.argmax(d), d.shape)
+    spec = result.scene.instance(name)
+    hysteresis = str(spec.value("hysteresis"))
+    # the FMU's in-step peaks and end values (mu = 0 where a storey has no yield shear)
+    mu = _final_row(result, name, "mu", n)
+    yield_shear = any(float(spec.value(element_name("Fy", i))) > 0.0 for i in range(1, n + 1))
+    peak_mu = storey_mu = None
+    if mu is not None and yield_shear:
+        storey_mu = int(np.argmax(mu)) + 1
+        peak_mu = float(mu[storey_mu - 1])
+    residual = _final_row(result, name, "drift_residual", n)
+    residual_m, residual_storey = 0.0, None
+    if residual is not None and hysteresis != "linear":
+        residual_storey = int(np.argmax(np.abs(residual))) + 1
+        residual_m = float(residual[residual_storey - 1])
     return BuildingSummary(
         n_storeys=n, peak_displacement_m=float(x[kx, fx]), peak_displacement_floor=int(fx + 1),
         peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[kd, fd]),
-        peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))))
+        peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))),
+        hysteresis=hysteresis, peak_ductility=peak_mu, peak_ductility_storey=storey_mu,
+        residual_drift_m=residual_m, residual_drift_storey=residual_storey,
+        hysteretic_energy_J=_final(result, column(name, "E_hysteretic")))
 
 
 def summarize(result: SimulationResult) -> Summary:
@@ -327,7 +378,7 @@ def summarize(result: SimulationResult) -> Summary:
         energy_contact_J=float(e["contact"][-1]), energy_contact_stored_J=float(e["stored"][-1]),
         energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
-        cost=result.cost, warnings=sampling_warnings(contacts))
+        cost=result.cost, warnings=sampling_warnings(contacts), energy_hysteretic_J=float(e["hysteretic"][-1]))
 
 
 #: plain-law step / impact time scale above which a run's summary warns (energy error ~ ratio)
