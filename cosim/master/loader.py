@@ -358,10 +358,13 @@ class _Builder:
         for i in range(1, n + 1):
             if element_name("m", i) not in flat:
                 raise self.error(f"{where}: missing mass m[{i}] (kg); give m = [...] with {n} values", "m", where)
-        for key in list(flat):   # the physical rules first (their messages say why), then the FMU's ranges
+        # the physical rules first (their messages say why: a yielding storey needs Fy > 0 where
+        # the FMU declares only Fy >= 0), then the FMU's declared ranges
+        for key in list(flat):
             self._check_storey(where, key, flat[key], n)
-            flat[key] = self._check_value(BUILDING, where, key, flat[key])
         self._check_storey_law(where, flat, n)
+        for key in list(flat):
+            flat[key] = self._check_value(BUILDING, where, key, flat[key])
         return flat
 
     def _storeys(self, where: str, table: Mapping[str, Any]) -> int:
