@@ -109,8 +109,17 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", nargs="*", help="bundled scene names (default: all)")
     parser.add_argument("--repeats", type=int, default=3, help="runs per timing, the fastest is kept (default 3)")
     parser.add_argument("--no-opensees", action="store_true")
-    parser.add_argument("--json", type=Path, help="also write the figures as JSON here")
+    parser.add_argument("--json", type=Path, help="also write the figures as JSON here (a new file)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     args = parser.parse_args(argv)
+    from cosim.files import OutputError, file_target, written_file
+
+    if args.json:                        # refused before the benchmark runs (minutes), never replaced unasked
+        try:
+            args.json = file_target(args.json, overwrite=args.overwrite)
+        except OutputError as exc:
+            print(f"error: {exc}")
+            return 2
     from cosim.peers.opensees import opensees_available
 
     opensees = not args.no_opensees and opensees_available()
@@ -127,7 +136,8 @@ def main(argv=None) -> int:
     print(table(rows))
     print(f"\n(benchmark wall time {time.perf_counter() - t:.0f} s)")
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1, default=float) + "\n")
+        with written_file(args.json) as partial:
+            partial.write_text(json.dumps(rows, indent=1, default=float) + "\n")
     return 0
 
 

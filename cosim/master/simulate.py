@@ -17,6 +17,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .coupling import get_strategy
+from .fmi import FMUError
 from .guard import StabilityGuard
 from .recording import Recorder, recorded_columns, tracked_columns
 from .results import Cost, SimulationResult
@@ -42,12 +43,27 @@ def _one_blas_thread(run):
     return limited
 
 
+def initial_outputs_finite(system: "System") -> None:
+    """Raise :class:`~cosim.master.fmi.FMUError` naming the instance and output if an output is
+    not finite after initialisation (before any step: the inputs wired from it would carry NaN
+    into every instance, and the first one to check its inputs would be blamed)."""
+    y = system.y
+    if np.isfinite(y).all():
+        return
+    bad = system.columns[int(np.flatnonzero(~np.isfinite(y))[0])]
+    instance, _, variable = bad.partition(".")
+    value = float(y[system.columns.index(bad)])
+    raise FMUError(instance, "fmi2ExitInitializationMode", 3,
+                   [f"{instance}: output {variable} = {value!r} after initialisation: its parameters are beyond "
+                    f"what its arithmetic supports (check the magnitudes of its masses, stiffnesses and periods)"])
+
+
 @_one_blas_thread
 def simulate(system: "System", strategy: str | type | None = None, stop_time: float | None = None,
              step: float | None = None, progress: bool | None = None,
              callback: Callable[[float], None] | None = None, check_stability: bool = True,
              output_interval: float | None = None, record: str | Sequence[str] = "summary",
-             **options: Any) -> SimulationResult:
+             max_steps: int | None = None, **options: Any) -> SimulationResult:
     """Initialise ``system`` and run it from t0 = 0 to ``stop_time`` with a coupling strategy.
 
     ``strategy``: a name from :data:`cosim.master.coupling.STRATEGIES` or a
@@ -61,7 +77,10 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     is recorded.  ``options`` go to the strategy's constructor.  ``check_stability``: after every
     step, :class:`cosim.master.guard.StabilityGuard` raises
     :class:`cosim.master.guard.InstabilityError` (saying what to change) when the run has
-    produced non-finite values, a penetration beyond physical sense or created energy.
+    produced non-finite values, a penetration beyond physical sense or created energy, or when
+    its work explodes (more than ``max_steps`` accepted steps, or refinements and contact
+    substeps far beyond any impact's needs).  The outputs at t0 (after initialisation) are
+    checked before the first step: a non-finite one stops the run naming the instance.
     """
     scene = system.scene
     stop_time = scene.stop_time if stop_time is None else float(stop_time)
@@ -82,9 +101,10 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     cpu = time.process_time()
     system.initialize(0.0, stop_time, host=cls.host)
     solver = cls(system, 0.0, stop_time, step, **options)
+    initial_outputs_finite(system)
     guard = None
     if check_stability:
-        guard = StabilityGuard(system)
+        guard = StabilityGuard(system, max_steps=max_steps, base_step=step)
     recorder = Recorder(system, stop_time, output_interval, recorded_columns(system, record))
     watched = set(solver.watched_columns()) | set(tracked_columns(system))
     if guard is not None:
@@ -111,9 +131,9 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
             t_start = solver.t
             plan.rows = True                   # a strategy that does not say where it steps reads all
             solver.step()
+            recorder.track(t_start, solver.t)  # first: it reads the counters the guard checks
             if guard is not None:
                 guard.check(solver.t, getattr(solver, "h_last", solver.h))
-            recorder.track(t_start, solver.t)
             if plan.rows and recorder.due(solver.t):
                 recorder.read_ints()
                 recorder.record(solver.t)
