@@ -254,13 +254,20 @@ def test_ctrl_c_while_the_fmus_validate_the_study_waits_for_them(tmp_path, catal
     study = load_study(write(tmp_path / "slow.toml", SLOW))
     timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
     validated = []
-    with pytest.raises(KeyboardInterrupt):
-        with ctrl_c_deferred():
-            timer.start()
-            validated.append(validate_study(study, catalog))   # 16 values on the FMUs: longer than 0.05 s
-            timer.join()   # the signal has arrived inside the block
-    assert validated == [["left", "right"]]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
+    # A pytest started as a background job inherits SIGINT ignored, and ctrl_c_deferred rightly
+    # leaves an ignored SIGINT ignored: give this process a terminal's default for the test.
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with ctrl_c_deferred():
+                timer.start()
+                validated.append(validate_study(study, catalog))   # 16 values on the FMUs: longer than 0.05 s
+                timer.join()   # the signal has arrived inside the block
+        assert validated == [["left", "right"]]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, inherited)
 
 
 # -- --retry-failed ----------------------------------------------------------------------------------
