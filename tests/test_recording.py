@@ -145,3 +145,21 @@ def test_rows_asked_for_land_long_steps_on_them():
     assert row_step(0.05, 0.01) == pytest.approx(0.01)      # 5: no long step
     assert row_step(0.015, 0.01) == pytest.approx(0.01)     # not a whole number of base steps
     assert row_step(0.004, 0.01) == pytest.approx(0.01)
+
+
+def test_the_memory_bound_counts_the_rows_the_output_interval_keeps(monkeypatch):
+    """limits.check_run_size sizes the history as the recorder keeps it: one row per step, or
+    per output interval when that is longer, and the listed columns only; so a long record at
+    a coarse output interval is not refused for memory it will not use, and the same run with
+    a row per step is (here with 100 MB said to be available)."""
+    from cosim.master import limits
+
+    monkeypatch.setattr(limits, "available_memory", lambda: 100 * 10**6)
+    per_step = load_scene("default", ["stop_time=3000"])            # 300 001 rows x 194 columns: 931 MB
+    with pytest.raises(limits.LimitError, match="more than half of the 100 MB available"):
+        limits.check_run_size(per_step, record="all")
+    coarse = load_scene("default", ["stop_time=3000", "output_interval=1.0"])
+    size = limits.check_run_size(coarse, record="all")               # 3002 rows
+    assert size.rows == 3002 and size.steps == 300_000
+    listed = limits.check_run_size(per_step, record=["left.x[1]", "right.x[1]"])   # 300 001 x 3 x 16 B
+    assert listed.columns == 2 and listed.memory_bytes < 50 * 10**6
