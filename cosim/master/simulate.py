@@ -19,7 +19,7 @@ from threadpoolctl import threadpool_limits
 from .coupling import get_strategy
 from .fmi import FMUError
 from .guard import StabilityGuard
-from .recording import Recorder, recorded_columns, tracked_columns
+from .recording import Recorder, impact_detail_columns, recorded_columns, tracked_columns
 from .results import Cost, SimulationResult
 
 if TYPE_CHECKING:
@@ -106,7 +106,7 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     if check_stability:
         guard = StabilityGuard(system, max_steps=max_steps, base_step=step)
     recorder = Recorder(system, stop_time, output_interval, recorded_columns(system, record))
-    watched = set(solver.watched_columns()) | set(tracked_columns(system))
+    watched = set(solver.watched_columns()) | set(tracked_columns(system)) | set(impact_detail_columns(system))
     if guard is not None:
         watched |= set(guard.watched_columns())
     system.watch(watched, set(recorder.columns))
@@ -162,4 +162,5 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
         scene=scene, strategy=cls.name, time=times, columns=list(recorder.columns), values=values, cost=cost,
         instances=[n.name for n in system.nodes], stats=stats, final=final, peaks=recorder.peaks(),
         onsets={name: list(v) for name, v in recorder.onsets.items()}, output_interval=output_interval,
+        impact_rows=recorder.impact_rows, first_onsets=dict(recorder.first_onsets),
         initial=initial)
