@@ -77,6 +77,11 @@ def replay_contact(result: "SimulationResult", contact: str) -> list[ContactTraj
         return None
     if result.cost.do_steps.get(contact, result.cost.communication_steps) != result.cost.communication_steps:
         return None
+    level = next(lv for lv in result.scene.levels if lv.instance == contact)
+    if not all(result.has(column(b, element_name(v, f))) for b, f in ((level.left, level.floor_left),
+                                                                      (level.right, level.floor_right))
+               for v in ("x", "v")):
+        return None          # the recorded set lacks the contact's inputs (--record all keeps them)
     spec, delta, rate = _inputs(result, contact)
     t = result.time
     if not bool(spec.value("resolve_impacts")):
