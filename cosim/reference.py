@@ -728,11 +728,11 @@ def scene_inputs(scene) -> dict:
 
     Builds the same objects the slaves build in ``initialize()`` from the same parameter
     values (scene values over FMU start values): ``ShearBuilding`` (``from_period`` when
-    ``T1 > 0``), ``load_record`` and ``law_for``.  Contacts keep the scene's order.
+    ``T1 > 0``), ``record_from_parameters`` and ``law_for``.  Contacts keep the scene's order.
     """
     from fmu_src.building_slave import Building
     from fmu_src.contact_laws import law_for
-    from fmu_src.ground_records import load_record
+    from fmu_src.ground_records import record_from_parameters
     from fmu_src.shear_building import ShearBuilding
 
     buildings, x0, v0 = [], [], []
@@ -754,9 +754,7 @@ def scene_inputs(scene) -> dict:
     if scene.ground is not None:
         from fmu_src.ground_motion_slave import GroundMotion
         p = {**_start_values(GroundMotion), **scene.ground.parameters}
-        ground = load_record(p["record"], fmt=p["format"], dt=float(p["dt"]) or None, units=p["units"],
-                             scale=float(p["scale"]), target_pga=float(p["target_pga"]) or None,
-                             time_shift=float(p["time_shift"]))
+        ground = record_from_parameters(p)
 
     contacts = []
     if scene.contacts:

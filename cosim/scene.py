@@ -31,7 +31,9 @@ Rules (checked before anything is instantiated, each a one-line
 * Top-level keys: ``name description stop_time step coupling ground
   buildings pounding``; anything else is an error.
 * ``[ground]`` keys are ``ground_motion.fmu`` parameters.  Without the table
-  no ground-motion FMU is instantiated (free vibration).
+  no ground-motion FMU is instantiated (free vibration).  ``target_sa`` may be
+  written ``{period = 0.5, value = 4.9}`` (s, m/s^2; optional ``damping``,
+  default 0.05); at most one of ``target_pga``, ``target_pga_g``, ``target_sa``.
 * ``[buildings.<name>]`` keys are ``building.fmu`` parameters.  An array
   parameter (``m``, ``k``, ``x0``, ``v0``) is a list of one value per floor
   (1 = lowest) or a scalar applied to every floor; ``"m[3]" = ...`` sets one
@@ -68,6 +70,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from fmu_src.ground_records import SCALING_TARGETS, scaling_conflict
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
 
@@ -78,6 +82,8 @@ POUNDING_MASTER_KEYS = ("floors", "allow_initial_overlap")
 # expand scalars when no model description is at hand.
 BUILDING_ARRAYS = ("m", "k", "x0", "v0")
 GROUND, BUILDING, POUNDING = "ground_motion", "building", "pounding"
+# target_sa = {period = ..., value = ..., damping = ...} in [ground] -> ground_motion.fmu parameters
+SA_TARGET_KEYS = {"value": "target_sa", "period": "sa_period", "damping": "sa_damping"}
 
 
 class SceneError(ValueError):
@@ -332,7 +338,7 @@ class _Builder:
 
         ground = None
         if "ground" in raw:
-            ground = InstanceSpec("ground", GROUND, self._flat_parameters(raw["ground"], GROUND, "ground"))
+            ground = InstanceSpec("ground", GROUND, self._ground_parameters(raw["ground"]))
         buildings = [InstanceSpec(n, BUILDING, self._building_parameters(n, t)) for n, t in buildings_raw.items()]
 
         contacts: list[InstanceSpec] = []
@@ -440,6 +446,33 @@ class _Builder:
                 raise self.error(f"{where}.{key} = {value!r} must be a single value", key, where)
             out[key] = self._check_value(fmu, where, key, value)
         return out
+
+    def _ground_parameters(self, table: Mapping[str, Any]) -> dict[str, Any]:
+        """``[ground]`` as FMU parameters: ``target_sa = {period = T, value = PSa, damping = z}``
+        becomes ``sa_period``, ``target_sa`` and ``sa_damping``; at most one scaling target."""
+        flat = dict(table)
+        target = flat.get("target_sa")
+        if isinstance(target, dict):
+            del flat["target_sa"]
+            unknown = sorted(set(target) - set(SA_TARGET_KEYS))
+            missing = [k for k in ("period", "value") if k not in target]
+            if unknown or missing:
+                raise self.error(f"ground.target_sa = {target!r}: " + (
+                    f"unknown key {unknown[0]!r}" if unknown else f"missing {missing[0]!r}")
+                    + f"; write target_sa = {{period = <s>, value = <m/s^2>}} (optional damping = <ratio>, "
+                    f"default 0.05)", "target_sa", "ground")
+            for key, parameter in SA_TARGET_KEYS.items():
+                if key in target:
+                    if parameter in flat:
+                        raise self.error(f"ground.{parameter} is given twice: as {parameter} and as "
+                                         f"target_sa.{key}", "target_sa", "ground")
+                    flat[parameter] = target[key]
+        flat = self._flat_parameters(flat, GROUND, "ground")
+        conflict = scaling_conflict(**{k: flat.get(k) for k in SCALING_TARGETS})
+        if conflict:
+            given = [k for k in SCALING_TARGETS if flat.get(k)]
+            raise self.error(f"[ground]: {conflict}", given[-1], "ground")
+        return flat
 
     def _array_names(self) -> set[str]:
         variables = self._fmu_variables(BUILDING)

@@ -200,7 +200,8 @@ def test_malformed_column_and_csv_name_file_and_line(tmp_path):
         load_record(good, fmt="column", dt=0.01)
     gap = tmp_path / "gap.csv"
     gap.write_text("time,acc\n0,0\n0.01,1\n0.03,2\n0.04,3\n0.05,4\n")
-    with pytest.raises(RecordError, match=r"gap\.csv, line 3: non-uniform time step"):
+    # the sample at 0.02 s is missing: the jump is at line 4 (0.03 s), where it was written
+    with pytest.raises(RecordError, match=r"gap\.csv, line 4: time jumps from 0\.01 s \(line 3\) to 0\.03 s"):
         load_record(gap)
     three = tmp_path / "three.csv"
     three.write_text("t,a\n0,1\n0.1,2,3\n")
