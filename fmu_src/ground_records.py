@@ -616,9 +616,13 @@ def scale_factor(record: "Record", scale: float = 1.0, target_pga: float | None 
         factor = float(scale)
         if not math.isfinite(factor):
             raise ValueError(f"scale = {scale!r} is not finite")
-    if abs(factor) * record.pga > MAX_PGA_G * G:
-        raise ValueError(f"scaling by {factor:.6g} gives a PGA of {abs(factor) * record.pga / G:.6g} g, "
-                         f"above the limit of {MAX_PGA_G:g} g")
+    pga_g = abs(factor) * record.pga_g
+    if pga_g > MAX_PGA_G:
+        if factor == 1.0:
+            raise ValueError(f"{source}: its PGA is {pga_g:.6g} g, above the limit of {MAX_PGA_G:g} g: check "
+                             f"units (a record in cm/s2 read as g is {G * 100:.0f} times too strong), or scale it")
+        raise ValueError(f"{source}: scaling by {factor:.6g} gives a PGA of {pga_g:.6g} g, above the limit "
+                         f"of {MAX_PGA_G:g} g")
     return factor
 
 

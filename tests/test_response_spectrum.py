@@ -8,8 +8,8 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 
 from fmu_src.ground_records import load_record
-from fmu_src.response_spectrum import (PERIOD_LIMITS, _Oscillator, default_periods, pseudo_acceleration,
-                                       response_spectrum, sdof_history)
+from fmu_src.response_spectrum import (PERIOD_LIMITS, _Modes, default_periods, modal_sum_peak,
+                                       pseudo_acceleration, response_spectrum, sdof_history)
 
 eqsig_sdof = pytest.importorskip("eqsig.sdof")  # in the test extra; a missing one must not pass silently
 # eqsig writes 2 pi as 6.2831853 (relative error 1.2e-8): its oscillator of "period" T has
@@ -42,12 +42,14 @@ def test_recurrence_coefficients_are_the_duhamel_integrals(period, zeta, dt):
     (scipy's expm of the augmented real system is itself off by up to 40 % at T = 1 ms,
     zeta = 0.5, dt = 0.02 s, where its entries span 12 orders: quadrature is the oracle.)
     """
-    osc = _Oscillator(period, zeta)
-    lam, b0, b1 = osc.recurrence(dt)
-    mu = osc.mu
+    osc = _Modes([period], [zeta])
+    lam = complex(osc.advance(1.0 + 0j, 0.0, 0.0, dt)[0])
+    b0 = complex(osc.advance(0j, 1.0, -1.0 / dt, dt)[0])        # a_i = 1, a_{i+1} = 0
+    b1 = complex(osc.advance(0j, 0.0, 1.0 / dt, dt)[0])         # a_i = 0, a_{i+1} = 1
+    mu = complex(osc.mu[0])
 
     # breakpoints every quarter of a damped period: a smooth integrand on each piece
-    quarter = np.linspace(0.0, dt, int(4 * dt / (2 * math.pi / osc.wd)) + 2)
+    quarter = np.linspace(0.0, dt, int(4 * dt / (2 * math.pi / osc.wd[0])) + 2)
 
     def duhamel(shape):
         parts = [sum(quad(lambda t, f=f: f(-np.exp(mu * (dt - t)) * shape(t)), lo, hi,
@@ -142,9 +144,10 @@ def test_free_vibration_after_the_record_counts():
     a = np.array([0.0, 3.0, 3.0, 1.0])           # ends at 1 m/s^2: a jump to 0 after the record
     spec = response_spectrum(a, dt, [period], zeta)
     assert spec.peak_time[0] > 3 * dt
-    osc = _Oscillator(period, zeta)
-    q_end = osc.states_at_samples(a, dt)[-1]
-    s = np.linspace(0.0, 2 * period, 80001)
+    osc = _Modes([period], [zeta])
+    a0, slope = a[:-1], np.diff(a) / dt
+    q_end = osc.states(a0, slope, dt)[-1]
+    s = np.linspace(0.0, 2 * period, 80001)[:, None]
     brute = np.max(np.abs(osc.displacement(np.exp(osc.mu * s) * q_end)))
     # the grid misses the peak by at most (w ds)^2 / 8 relative (free vibration: u'' = -w^2 u at a peak)
     assert brute <= spec.displacement[0] <= brute * (1 + (2 * math.pi / period * s[1]) ** 2 / 8 + 1e-12)
