@@ -172,7 +172,7 @@ class _Modes:
                 c = lam_block * c + last
             out[0, mode] = 0.0
             out[1:, mode] = (within + carry[:, None] * powers[None, :]).reshape(-1)[:n]
-            return out
+        return out
 
 
 def _intervals(a: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

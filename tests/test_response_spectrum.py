@@ -226,3 +226,39 @@ def test_result_is_read_only_and_inputs_are_checked():
     with pytest.raises(ValueError, match=r"dt = 0.0 s must be finite and > 0"):
         response_spectrum([0.0, 1.0], 0.0, [1.0])
     assert default_periods()[0] == pytest.approx(0.02) and default_periods()[-1] == pytest.approx(10.0)
+
+
+# -- weighted sums of modes ------------------------------------------------------------------------------
+def test_modal_sum_peak_against_a_1000_fold_subdivision():
+    """Two modes with weights of both signs, signed and absolute peaks, against the exact
+    recurrence on the record subdivided 1000 times (sampling bound as above)."""
+    a, dt = random_record(seed=11, n=120, dt=0.02, end_at_rest=True)
+    periods, dampings, weights = [0.9, 0.25], [0.05, 0.08], [1.3, -0.4]
+    fine_dt = dt / 1000
+    fine = np.interp(np.arange(0, (a.size - 1) * 1000 + 1) * fine_dt, dt * np.arange(a.size), a)
+    fine = np.concatenate([fine, np.zeros(int(4 * max(periods) / fine_dt))])
+    total = sum(w * sdof_history(fine, fine_dt, t, z)[0] for t, z, w in zip(periods, dampings, weights))
+    w_max = 2 * math.pi / min(periods)
+    slack = (np.max(np.abs(a)) * sum(map(abs, weights)) + w_max ** 2 * np.max(np.abs(total))) * fine_dt ** 2 / 8
+    for signed, brute in ((True, np.max(total)), (False, np.max(np.abs(total)))):
+        peak, when = modal_sum_peak(a, dt, periods, dampings, weights, signed=signed)
+        assert brute * (1 - 1e-9) <= peak <= brute * (1 + 1e-9) + slack
+        k = int(np.argmax(total if signed else np.abs(total)))
+        assert when == pytest.approx(k * fine_dt, abs=0.01)
+    with pytest.raises(ValueError, match="one value per mode; got 2, 1 and 2"):
+        modal_sum_peak(a, dt, periods, [0.05], weights)
+    with pytest.raises(ValueError, match="a damping ratio of 0 never lets the free vibration"):
+        modal_sum_peak(a, dt, periods, [0.0, 0.05], weights)
+
+
+def test_free_vibration_that_does_not_decay_in_time_is_refused():
+    """A pulse leaves two nearly undamped modes (zeta = 1e-13) of equal amplitude with periods
+    in the golden ratio: their sum approaches twice the amplitude only slowly (best phase
+    match within 1000 periods ~ 2 pi / (sqrt(5) 1000) rad, 1 - cos of it 4e-6), while the
+    amplitude left decays by 6e-10: nothing can settle it to 1e-9, and the search stops at
+    1000 longest periods, saying so."""
+    periods = [1.0, (1 + math.sqrt(5)) / 2]
+    weights = [2 * math.pi / t for t in periods]        # a pulse gives mode k an amplitude ~ 1 / w_k
+    with pytest.raises(ValueError, match=r"the free vibration after the record still has an amplitude of "
+                                         r"\S+ m after \S+ s \(1000 longest periods\), above the peak"):
+        modal_sum_peak([0.0, 1.0, 0.0], 0.01, periods, [1e-13, 1e-13], weights)
