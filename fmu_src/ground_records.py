@@ -433,19 +433,20 @@ def _parse_at2(path: Path, text: _Text):
     line4 = lines[3]
     m = _NPTS_DT.search(line4)
     if m:
-        npts_text, dt = m.group(1), _number(path, 4, m.group(2))
+        npts_text, dt_text = m.group(1), m.group(2)
     else:  # NGA-West1 style: "4164    0.0100    NPTS, DT" -> first integer, next float
         tokens = _NUMBER.findall(line4)
         ints = [i for i, tok in enumerate(tokens) if re.fullmatch(r"\d+", tok)]
         if not ints or ints[0] + 1 >= len(tokens):
             raise RecordError(path, 4, f"expected 'NPTS= <n>, DT= <s> SEC' or '<n> <dt> NPTS, DT', found {line4.strip()!r}")
-        npts_text, dt = tokens[ints[0]], _number(path, 4, tokens[ints[0] + 1])
+        npts_text, dt_text = tokens[ints[0]], tokens[ints[0] + 1]
+    dt = _number(path, 4, dt_text)
     npts = int(npts_text)
     if npts > MAX_RECORD_SAMPLES:
         raise RecordError(path, 4, f"NPTS = {npts_text} is more than {MAX_RECORD_SAMPLES:,} samples, "
                                    f"the limit of a record")
     if not dt > 0.0:
-        raise RecordError(path, 4, f"DT = {dt!r} s must be > 0")
+        raise RecordError(path, 4, f"DT = {dt_text} s must be > 0")
     values: list[float] = []
     last = 4
     for lineno, line in text.lines():
@@ -591,7 +592,7 @@ def scale_factor(record: "Record", scale: float = 1.0, target_pga: float | None 
     pseudo-spectral acceleration at ``sa_period`` (s) with damping ``sa_damping`` (default 0.05)
     after scaling.  With no target, ``scale``.  A target of 0 or None is not set.
     """
-    from fmu_src.response_spectrum import DEFAULT_DAMPING, pseudo_acceleration
+    from .response_spectrum import DEFAULT_DAMPING, pseudo_acceleration
 
     conflict = scaling_conflict(target_pga, target_pga_g, target_sa)
     if conflict:

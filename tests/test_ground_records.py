@@ -177,6 +177,7 @@ def at2_with(tmp_path, old, new, name="bad.AT2"):
     (lambda p: at2_with(p, "ACCELERATION TIME SERIES IN UNITS OF G", "VELOCITY IN CM/S"), 3, r"expected 'ACCELERATION"),
     (lambda p: at2_with(p, "NPTS=      7, DT=   .0100 SEC,", "no count here"), 4, r"expected 'NPTS="),
     (lambda p: at2_with(p, "UNITS OF G", "UNITS OF FURLONGS"), 3, r"unknown unit 'FURLONGS'"),
+    (lambda p: at2_with(p, "DT=   .0100 SEC", "DT=   .0000 SEC"), 4, r"DT = \.0000 s must be > 0"),
 ])
 def test_malformed_at2_names_file_and_line(tmp_path, make, line, match):
     path = make(tmp_path)
