@@ -17,11 +17,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cosim.accuracy import CRITERIA, Family, Row, reference_metrics, run_cosim, run_peer  # noqa: E402
-from cosim.master import Catalog  # noqa: E402
-from cosim.reference import reference_for_scene  # noqa: E402
-from cosim.run import default_fmu_dir  # noqa: E402
-from cosim.scene import load_scene  # noqa: E402
+from cosim.apps.accuracy import CRITERIA, Family, Row, reference_metrics, run_cosim, run_peer  # noqa: E402
+from cosim.master.system import Catalog  # noqa: E402
+from cosim.peers.reference import reference_for_scene  # noqa: E402
+from cosim.fmus import default_fmu_dir  # noqa: E402
+from cosim.master.loader import load_scene  # noqa: E402
 
 #: the package's default settings, chosen from the accuracy study (docs/accuracy.md)
 DEFAULT = Family("adaptive (default)", "adaptive", True, "contact_fraction", (1 / 2,), base_step=1e-2)
@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     print(f"  {1e6 * row.wall_time_s / max(row.communication_steps, 1):.1f} us per communication step; "
           f"reference / default = {ref['wall_time_s'] / row.wall_time_s:.1f}x")
     if not args.no_opensees:
-        from cosim.opensees_peer import opensees_available
+        from cosim.peers.opensees import opensees_available
 
         if opensees_available():
             peers = [run_peer(scene, OPENSEES_DT, ref) for _ in range(args.repeats)]
@@ -77,6 +77,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from cosim.fmi import exit_process
+    from cosim.master.fmi import exit_process
 
     exit_process(main())

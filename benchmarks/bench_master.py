@@ -20,8 +20,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.master import Catalog, System, simulate  # noqa: E402
-from cosim.scene import load_scene  # noqa: E402
+from cosim.master.simulate import simulate
+from cosim.master.system import Catalog, System  # noqa: E402
+from cosim.master.loader import load_scene  # noqa: E402
 
 SCENES = ("default", "single_impact", "free_vibration", "one_building", "kasai_maison")
 
@@ -33,9 +34,9 @@ def main(argv=None) -> int:
     parser.add_argument("--profile", action="store_true", help="profile the default scene")
     args = parser.parse_args(argv)
     if args.fmu_dir is None:
-        from build_fmu import DEFAULT_OUT, build_all
-        build_all(DEFAULT_OUT)
-        args.fmu_dir = DEFAULT_OUT
+        from cosim.fmus import default_fmu_dir
+
+        args.fmu_dir = default_fmu_dir()
     print(f"{'scene':<16}{'steps':>7}{'instances':>10}{'first run s':>13}{'best s':>9}{'us/step':>9}{'FMI calls':>11}")
     with Catalog(args.fmu_dir) as catalog:
         for name in SCENES:
@@ -44,11 +45,11 @@ def main(argv=None) -> int:
                 times = []
                 for _ in range(args.repeat):
                     result = simulate(system, progress=False)
-                    times.append(result.wall_time_s)
+                    times.append(result.cost.wall_time_s)
                 best = min(times)
-                n = result.communication_steps
+                n = result.cost.communication_steps
                 print(f"{name:<16}{n:>7}{len(system.nodes):>10}{times[0]:>13.3f}{best:>9.3f}"
-                      f"{1e6 * best / n:>9.1f}{result.fmu_calls:>11}")
+                      f"{1e6 * best / n:>9.1f}{result.cost.fmu_calls:>11}")
                 if args.profile and name == "default":
                     profiler = cProfile.Profile()
                     profiler.enable()
@@ -63,6 +64,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from cosim.fmi import exit_process
+    from cosim.master.fmi import exit_process
 
     exit_process(main())

@@ -33,8 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from build_fmu import build_all  # noqa: E402
-from cosim.study import load_study, read_results, run_study  # noqa: E402
+from cosim.fmus import build_all  # noqa: E402
+from cosim.apps.study import load_study, read_results, run_study  # noqa: E402
 
 
 def throughput(study_file: Path, fmu_dir: Path, workers: int, out: Path) -> dict:
@@ -107,6 +107,6 @@ stop_time = {args.stop_time!r}
 
 
 if __name__ == "__main__":
-    from cosim.fmi import exit_process
+    from cosim.master.fmi import exit_process
 
     exit_process(main())

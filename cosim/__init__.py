@@ -1,24 +1,35 @@
-"""fmpy master for the pounding FMUs: scenes, system assembly, coupling, results.
+"""pounding-cosim: structural pounding of adjacent buildings as FMI 2.0 co-simulation.
 
-Layers (see docs/architecture.md): :mod:`cosim.fmi` (the only module that
-calls FMI functions), :mod:`cosim.scene` (scene files), :mod:`cosim.master`
-(system assembly, run loop), :mod:`cosim.coupling` (strategies),
-:mod:`cosim.results` (summary, CSV, plots), :mod:`cosim.run` (CLI and
-:func:`run_scene`).
+Layers (docs/architecture.md), each importing only those before it:
+
+* ``fmu_src`` (a separate package): the physics and the pythonfmu slaves;
+* :mod:`cosim.fmus` (the FMUs as data, building them), :mod:`cosim.files`;
+* :mod:`cosim.master`: FMI layer, scenes, system, coupling strategies, guard, results;
+* :mod:`cosim.peers`: the reference solver, OpenSees, libcosim, SSP;
+* :mod:`cosim.apps`: studies, calibration, accuracy study, reproduction report;
+* :mod:`cosim.cli`: the one command line (``pounding-cosim``).
+
+The common names are importable from here (lazily: ``import cosim`` loads nothing else).
 """
-from .coupling import STRATEGIES, CouplingStrategy, GaussSeidel, Jacobi, get_strategy
-from .fmi import FMU, FMUError, Instance
-from .master import Catalog, SimulationResult, System, simulate
-from .results import summarize, write_results
-from .scene import Scene, SceneError, load_scene
+from __future__ import annotations
 
-__all__ = ["STRATEGIES", "CouplingStrategy", "GaussSeidel", "Jacobi", "get_strategy", "FMU", "FMUError",
-           "Instance", "Catalog", "SimulationResult", "System", "simulate", "summarize", "write_results",
-           "Scene", "SceneError", "load_scene", "run_scene", "RunResult"]
+from importlib import import_module
+from importlib.metadata import PackageNotFoundError, version as _version
+
+try:
+    __version__ = _version("pounding-cosim")   # single source: pyproject.toml
+except PackageNotFoundError:   # a source tree that was never installed
+    __version__ = "0+unknown"
+
+_EXPORTS = {name: "cosim.master" for name in (
+    "run_scene", "RunResult", "load_scene", "Override", "Scene", "SceneError", "FMUError", "InstabilityError",
+    "Catalog", "System", "simulate", "summarize", "Summary", "Cost", "SimulationResult", "STRATEGIES",
+    "get_strategy", "bundled_scenes")}
+
+__all__ = ["__version__", *_EXPORTS]
 
 
-def __getattr__(name):  # run.py is also a script; import it lazily
-    if name in ("run_scene", "RunResult"):
-        from . import run
-        return getattr(run, name)
-    raise AttributeError(name)
+def __getattr__(name):
+    if name in _EXPORTS:
+        return getattr(import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'cosim' has no attribute {name!r}")

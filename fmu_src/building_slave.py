@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
-from fmu_src.shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
+from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
+from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64

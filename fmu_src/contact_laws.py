@@ -10,21 +10,27 @@ Conventions (as in the seed paper, Naderpour et al. c. 2016, and its sources):
 * ``v_imp`` [m/s] is the approach speed latched at contact onset;
 * ``CR`` [-] is the coefficient of restitution, rebound speed / approach speed.
 
-Every model below is a spring ``k delta^n`` plus a dissipative term governed by one
-dimensionless damping constant ``zeta``.  Two families:
+Every law is a spring ``k delta^n`` plus a dissipative term governed by one dimensionless
+damping constant ``zeta``.  The laws are registered in ONE table, :data:`LAWS` (name ->
+:class:`LawSpec`): its force shape, when the dashpot acts, how the contact ends, the
+published constant from CR, labels and the peers' equivalents.  Every consumer (this
+module's :class:`ContactLaw`, the in-step resolver's scaled kernels, the reference solver,
+the report, the OpenSees peer) reads the table; an unknown name is an error everywhere
+(:func:`law_spec`).  Adding a law of an existing shape is one entry (plus its tests); a
+new shape is one :class:`ForceShape` subclass.  The shapes:
 
-``kelvin_voigt``, ``jankowski``, ``barros2013`` (dashpot ``c delta_dot``)
+``DASHPOT`` (``kelvin_voigt``, ``jankowski``, ``barros2013``)
     ``F = k delta^n + c delta_dot`` with ``c = 2 zeta sqrt(k m delta^(n-1))``.
     For n = 1 this is Anagnostopoulos' ``c = 2 zeta sqrt(k m)`` (seed Eq 2.3); for
     n = 1.5 it is Jankowski's ``c = 2 zeta sqrt(k sqrt(delta) m)`` (Eq 2.4).  The same
     generalisation keeps every law scale invariant for any n.
 
-``hertzdamp``, ``ye``, ``naderpour2013``, ``hunt_crossley``, ``gonthier`` (Hertz-damp)
+``HERTZDAMP`` (``hertzdamp``, ``ye``, ``naderpour2013``, ``hunt_crossley``, ``gonthier``)
     ``F = k delta^n (1 + chi delta_dot)`` with ``chi = zeta / v_imp``; the seed writes
     ``c = zeta_paper delta^n`` with ``zeta_paper = k chi``.  Here ``zeta = chi v_imp`` is the
     dimensionless constant of each published formula.
 
-``crvk`` (the seed paper's proposed model, Eqs 3.1, 3.4-3.9, regularised)
+``CRVK`` (the seed paper's proposed model, Eqs 3.1, 3.4-3.9, regularised)
     Written out, Eqs 3.4, 3.5 and 3.9 give the damping force ``c delta_dot =
     A k v_imp^2 delta^(n-1) / delta_ddot`` with ``A = 0.0159 (1 - CR) CR^0.2805`` (the
     printed ``delta_imp^2`` must be ``v_imp^2`` for F to be a force).  Literally it is 0/0 at
@@ -35,31 +41,23 @@ dimensionless damping constant ``zeta``.  Two families:
     then the constant ``A``, calibrated so that the impact reaches the requested CR
     (:func:`crvk_constant`, exact to quadrature accuracy; see ``docs/contact_models.md``).
 
+``ELASTIC`` (``hertz``): ``F = k delta^n``, no dashpot.
+
 Scale invariance: with ``L = (m v_imp^2 / k)^(1/(n+1))``, ``T = L / v_imp`` and
 ``F0 = k L^n`` every law above becomes a function of ``delta/L`` and ``delta_dot/v_imp``
 only, so the achieved CR depends on ``(model, zeta, n)`` and not on mass, stiffness or
-impact velocity.  :func:`scaled_force` is that dimensionless form; the in-step impact
-resolver integrates it.
+impact velocity.  :meth:`ForceShape.scaled_kernel` is that dimensionless form;
+the in-step impact resolver integrates it.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import brentq
-
-MODELS = ("hertz", "kelvin_voigt", "jankowski", "barros2013", "hertzdamp", "ye",
-          "naderpour2013", "hunt_crossley", "gonthier", "crvk")
-
-#: models of the form k delta^n + c(delta) delta_dot
-DASHPOT_MODELS = ("kelvin_voigt", "jankowski", "barros2013")
-#: models of the form k delta^n (1 + zeta delta_dot / v_imp)
-HERTZDAMP_MODELS = ("hertzdamp", "ye", "naderpour2013", "hunt_crossley", "gonthier")
-#: models whose dissipative term acts only while the bodies approach (delta_dot > 0)
-APPROACH_ONLY_MODELS = ("jankowski", "barros2013", "crvk")
-#: models with a free damping constant (everything except the elastic Hertz law)
-DAMPED_MODELS = tuple(m for m in MODELS if m != "hertz")
 
 #: the constant printed in the seed's Eq 3.9, A = 0.0159 (1 - CR) CR^0.2805
 CRVK_PRINTED_FACTOR = 0.0159
@@ -71,6 +69,14 @@ CRVK_PRINTED_EXPONENT = 0.2805
 #: Hertz-damp dashpot off.)
 MIN_IMPACT_SPEED = 1e-6
 
+#: when the dissipative term acts (LawSpec.dashpot)
+NONE, ALWAYS, APPROACH = "none", "always", "approach"
+#: how a contact ends (LawSpec.separation): where the penetration returns to 0; where the raw
+#: force reaches 0 first (a dashpot pulling in restitution); or the latter only while an
+#: external force pulls the bodies apart (the Hertz-damp factor 1 + zeta u cannot change sign
+#: in a free impact)
+PENETRATION, FORCE, FORCE_WHEN_PULLED = "penetration", "force", "force_when_pulled"
+
 
 # ----------------------------------------------------------------------------------------------
 # published damping constants
@@ -80,12 +86,6 @@ def _check_cr(CR: float) -> float:
     if not (0.0 < CR <= 1.0):
         raise ValueError(f"CR = {CR!r} is outside the allowed range 0 < CR <= 1")
     return CR
-
-
-def _check_model(model: str) -> str:
-    if model not in MODELS:
-        raise ValueError(f"model = {model!r} is not allowed: one of {', '.join(MODELS)}")
-    return model
 
 
 def zeta_kelvin_voigt(CR: float) -> float:
@@ -118,48 +118,34 @@ def zeta_barros2013(CR: float) -> float:
     return ((1.0 - CR * CR) / (CR * (math.sqrt(math.pi) * (0.5 * CR + 1.0 / math.pi) - CR))) ** 2
 
 
-def published_zeta(model: str, CR: float, n: float = 1.5) -> float:
-    """Dimensionless damping constant of ``model`` for restitution ``CR`` by its published formula.
+def zeta_hertzdamp(CR: float) -> float:
+    """Muthukumar & DesRoches (2006), seed Eq 2.6: ``zeta = 3 (1 - CR^2) / 4``."""
+    return 0.75 * (1.0 - CR * CR)
 
-    ======================  =====================================  ==============================
-    model                   zeta                                   source
-    ======================  =====================================  ==============================
-    hertz                   0                                      Hertz (elastic)
-    kelvin_voigt            -ln CR / sqrt(pi^2 + ln^2 CR)          Anagnostopoulos, seed Eq 2.3
-    jankowski               9 sqrt5 (1-CR^2) / (2 CR (CR(9pi-16)+16))  Jankowski 2006, Eq 2.4
-    barros2013              Eq 2.5 as printed                      "Barros et al. 2013"
-    hertzdamp               3 (1 - CR^2) / 4                       Muthukumar & DesRoches 2006, Eq 2.6
-    ye                      8 (1 - CR) / (5 CR)                    Ye, Li & Zhu 2009, Eq 2.7
-    naderpour2013           2 / (5 CR^2) sqrt((1-CR)/(1+CR))       Eq 2.8 as printed, divided by k
-    hunt_crossley           3 (1 - CR) / 2                         Hunt & Crossley 1975
-    gonthier                (1 - CR^2) / CR                        Gonthier et al. 2004
-    crvk                    A(CR, n) calibrated                    :func:`crvk_constant`
-    ======================  =====================================  ==============================
 
-    For the Hertz-damp family the value is ``chi * v_imp`` (``chi`` in s/m).  ``n`` only
-    matters for crvk, whose constant is calibrated for the exponent in use.
-    """
-    _check_model(model)
-    CR = _check_cr(CR)
-    if model == "hertz":
-        return 0.0
-    if model == "kelvin_voigt":
-        return zeta_kelvin_voigt(CR)
-    if model == "jankowski":
-        return zeta_jankowski(CR)
-    if model == "barros2013":
-        return zeta_barros2013(CR)
-    if model == "hertzdamp":
-        return 0.75 * (1.0 - CR * CR)
-    if model == "ye":
-        return 1.6 * (1.0 - CR) / CR
-    if model == "naderpour2013":
-        return 0.4 / (CR * CR) * math.sqrt((1.0 - CR) / (1.0 + CR))
-    if model == "hunt_crossley":
-        return 1.5 * (1.0 - CR)
-    if model == "gonthier":
-        return (1.0 - CR * CR) / CR
-    return crvk_constant(CR, n)
+def zeta_ye(CR: float) -> float:
+    """Ye, Li & Zhu (2009), seed Eq 2.7: ``zeta = 8 (1 - CR) / (5 CR)``."""
+    return 1.6 * (1.0 - CR) / CR
+
+
+def zeta_naderpour2013(CR: float) -> float:
+    """Seed Eq 2.8 as printed, divided by k: ``zeta = 2 / (5 CR^2) sqrt((1 - CR) / (1 + CR))``."""
+    return 0.4 / (CR * CR) * math.sqrt((1.0 - CR) / (1.0 + CR))
+
+
+def zeta_hunt_crossley(CR: float) -> float:
+    """Hunt & Crossley (1975): ``zeta = 3 (1 - CR) / 2``."""
+    return 1.5 * (1.0 - CR)
+
+
+def zeta_gonthier(CR: float) -> float:
+    """Gonthier et al. (2004): ``zeta = (1 - CR^2) / CR``."""
+    return (1.0 - CR * CR) / CR
+
+
+def zeta_elastic(CR: float) -> float:
+    """The elastic Hertz law has no damping constant: 0."""
+    return 0.0
 
 
 def crvk_printed_constant(CR: float) -> float:
@@ -229,6 +215,363 @@ def crvk_constant(CR: float, n: float = 1.5) -> float:
 
 
 # ----------------------------------------------------------------------------------------------
+# force shapes: the arithmetic of each family, dimensional and scaled, on its damped branch
+# ----------------------------------------------------------------------------------------------
+class ForceShape:
+    """The force of one family of laws on its *damped* branch (the dashpot acting).
+
+    :class:`LawSpec` decides when that branch applies (``dashpot``); outside it, and for
+    ``zeta = 0``, every law is the spring ``k delta^n``.  Methods, for ``delta > 0``:
+
+    * :meth:`raw_force`: ``F`` [N] before clipping at 0, from the clipped penetration
+      ``d = max(delta, 0)`` [m], the spring force ``k d^n`` [N], ``delta_dot`` [m/s] and the
+      latched ``v_imp`` [m/s];
+    * :meth:`derivatives`: ``(dF/d delta, dF/d delta_dot)`` [N/m, N s/m];
+    * :meth:`scaled_kernel`: ``f(d, u) -> (force, power)`` in the impact's scales
+      (``d = delta / L``, ``u = delta_dot / v_imp``, force ``F / (k L^n)`` clipped at 0,
+      power ``(force - d^n) u`` of the dissipative part, >= 0);
+    * :meth:`release`: ``g(d, u)`` with the sign of the scaled raw force (< 0: the force has
+      been clipped, the contact has released), or None if it cannot change sign.
+
+    Each expression is the one the package has always evaluated (bit for bit).
+    """
+
+    name = "shape"
+
+    def raw_force(self, law: "ContactLaw", d: float, spring: float, delta_dot: float, v_imp: float) -> float:
+        raise NotImplementedError
+
+    def derivatives(self, law: "ContactLaw", d: float, spring: float, dspring: float, delta_dot: float,
+                    v_imp: float) -> tuple[float, float]:
+        raise NotImplementedError
+
+    def scaled_kernel(self, zeta: float, n: float):
+        raise NotImplementedError
+
+    def release(self, zeta: float, n: float):
+        return None
+
+    def __repr__(self) -> str:
+        return self.name.upper()
+
+
+def elastic_kernel(n: float):
+    """``f(d, u) -> (d^n, 0)``: the spring alone, scaled (no dissipation)."""
+    def f(d, u):
+        return (d ** n, 0.0) if d > 0.0 else (0.0, 0.0)
+    return f
+
+
+class Elastic(ForceShape):
+    """``F = k delta^n``: no damped branch (``hertz``)."""
+
+    name = "elastic"
+
+    def raw_force(self, law, d, spring, delta_dot, v_imp):
+        return spring
+
+    def derivatives(self, law, d, spring, dspring, delta_dot, v_imp):
+        return dspring, 0.0
+
+    def scaled_kernel(self, zeta, n):
+        return elastic_kernel(n)
+
+
+class Dashpot(ForceShape):
+    """``F = k delta^n + c delta_dot``, ``c = 2 zeta sqrt(k m delta^(n-1))``; scaled
+    ``f = d^n + 2 zeta d^((n-1)/2) u``.  It turns negative in restitution (clipped)."""
+
+    name = "dashpot"
+
+    def raw_force(self, law, d, spring, delta_dot, v_imp):
+        c = 2.0 * law.zeta * math.sqrt(law.k * law.m * _pow_or_limit(d, law.n - 1.0))
+        return spring + c * delta_dot
+
+    def derivatives(self, law, d, spring, dspring, delta_dot, v_imp):
+        n = law.n
+        c = 2.0 * law.zeta * math.sqrt(law.k * law.m * d ** (n - 1.0))
+        dc = 0.5 * (n - 1.0) * c / d
+        return dspring + dc * delta_dot, c
+
+    def scaled_kernel(self, zeta, n):
+        half = 0.5 * (n - 1.0)
+        two_zeta = 2.0 * zeta
+
+        def f(d, u):
+            if d <= 0.0:
+                return 0.0, 0.0
+            s = d ** n
+            x = s + two_zeta * d ** half * u
+            x = x if x > 0.0 else 0.0
+            return x, (x - s) * u
+        return f
+
+    def release(self, zeta, n):
+        half = 0.5 * (n - 1.0)
+
+        def g(d, u):
+            return d ** n + 2.0 * zeta * d ** half * u
+        return g
+
+
+class HertzDamp(ForceShape):
+    """``F = k delta^n (1 + zeta delta_dot / v_imp)``; ``v_imp <= 0`` (no latched approach)
+    switches the dashpot off.  Scaled ``f = d^n (1 + zeta u)``: negative only when
+    ``1 + zeta u < 0``."""
+
+    name = "hertzdamp"
+
+    def raw_force(self, law, d, spring, delta_dot, v_imp):
+        if v_imp <= 0.0:
+            return spring
+        return spring * (1.0 + law.zeta * delta_dot / max(v_imp, MIN_IMPACT_SPEED))
+
+    def derivatives(self, law, d, spring, dspring, delta_dot, v_imp):
+        if v_imp <= 0.0:
+            return dspring, 0.0
+        chi = law.zeta / max(v_imp, MIN_IMPACT_SPEED)
+        return dspring * (1.0 + chi * delta_dot), spring * chi
+
+    def scaled_kernel(self, zeta, n):
+        def f(d, u):
+            if d <= 0.0:
+                return 0.0, 0.0
+            s = d ** n
+            x = s * (1.0 + zeta * u)
+            x = x if x > 0.0 else 0.0
+            return x, (x - s) * u
+        return f
+
+    def release(self, zeta, n):
+        def g(d, u):
+            return 1.0 + zeta * u
+        return g
+
+
+class Crvk(ForceShape):
+    """``F = (k delta^n + sqrt(k^2 delta^(2n) + 4 zeta k m v_imp^2 delta^(n-1))) / 2``;
+    scaled ``f = (d^n + sqrt(d^(2n) + 4 zeta d^(n-1))) / 2``.  Never negative."""
+
+    name = "crvk"
+
+    def raw_force(self, law, d, spring, delta_dot, v_imp):
+        q = law.zeta * law.k * law.m * v_imp * v_imp * _pow_or_limit(d, law.n - 1.0)
+        return 0.5 * (spring + math.sqrt(spring * spring + 4.0 * q))
+
+    def derivatives(self, law, d, spring, dspring, delta_dot, v_imp):
+        n = law.n
+        a = law.zeta * law.k * law.m * v_imp * v_imp
+        q = a * d ** (n - 1.0)
+        dq = (n - 1.0) * a * d ** (n - 2.0)
+        root = math.sqrt(spring * spring + 4.0 * q)
+        return 0.5 * (dspring + (spring * dspring + 2.0 * dq) / root), 0.0
+
+    def scaled_kernel(self, zeta, n):
+        four_a = 4.0 * zeta
+        n1 = n - 1.0
+
+        def f(d, u):
+            if d <= 0.0:
+                return 0.0, 0.0
+            s = d ** n
+            x = 0.5 * (s + math.sqrt(s * s + four_a * d ** n1))
+            return x, (x - s) * u
+        return f
+
+
+ELASTIC, DASHPOT, HERTZDAMP, CRVK = Elastic(), Dashpot(), HertzDamp(), Crvk()
+
+
+# ----------------------------------------------------------------------------------------------
+# the table
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LawSpec:
+    """Everything the package knows about one impact law (one entry of :data:`LAWS`).
+
+    Attributes
+    ----------
+    name : str
+        The ``model`` value of ``pounding.fmu`` and of scenes.
+    shape : ForceShape
+        Force on the damped branch (:data:`DASHPOT`, :data:`HERTZDAMP`, :data:`CRVK`, ...).
+    dashpot : str
+        When the dissipative term acts: ``"always"``, ``"approach"`` (``delta_dot > 0``:
+        restitution is the bare spring) or ``"none"``.
+    separation : str
+        How a contact ends: ``"penetration"`` (``delta`` back to 0), ``"force"`` (the raw
+        force reaches 0 first) or ``"force_when_pulled"`` (only under an external pull).
+    published : callable
+        The law's own damping constant from CR: ``published(CR)``, or ``published(CR, n)``
+        when ``constant_depends_on_n``.
+    source : str
+        Where the law and its constant come from (formula, reference).
+    label : str
+        Label of the law with its published constant in reports and plots.
+    printed : callable or None
+        The constant *as printed in the seed paper* when it differs from ``published``
+        (crvk: the printed Eq 3.9 constant; ``published`` is the exact calibration).
+    opensees : str or None
+        The OpenSees ``uniaxialMaterial`` that reproduces the law (the OpenSees peer).
+    """
+
+    name: str
+    shape: ForceShape
+    dashpot: str
+    separation: str
+    published: Callable[..., float]
+    source: str
+    label: str
+    printed: Callable[[float], float] | None = None
+    opensees: str | None = None
+    constant_depends_on_n: bool = False
+
+    def __post_init__(self):
+        if self.dashpot not in (NONE, ALWAYS, APPROACH):
+            raise ValueError(f"law {self.name!r}: dashpot = {self.dashpot!r} is not one of none, always, approach")
+        if self.separation not in (PENETRATION, FORCE, FORCE_WHEN_PULLED):
+            raise ValueError(f"law {self.name!r}: separation = {self.separation!r} is not one of "
+                             f"{PENETRATION}, {FORCE}, {FORCE_WHEN_PULLED}")
+
+    @property
+    def damped(self) -> bool:
+        """True if the law has a damping constant (every law except the elastic Hertz law)."""
+        return self.dashpot != NONE
+
+    @property
+    def approach_only(self) -> bool:
+        """True if the dissipative term acts only while ``delta_dot > 0``."""
+        return self.dashpot == APPROACH
+
+    @property
+    def clipped(self) -> bool:
+        """True if the raw force can turn negative in restitution (it is clipped at 0)."""
+        return self.separation != PENETRATION
+
+    def dashpot_acts(self, approaching: bool) -> bool:
+        """True on the damped branch: the dashpot acts always, or in approach only."""
+        return self.dashpot == ALWAYS or (self.dashpot == APPROACH and approaching)
+
+    def constant(self, CR: float, n: float = 1.5) -> float:
+        """The published damping constant at ``CR`` (checked), exponent ``n``."""
+        CR = _check_cr(CR)
+        return self.published(CR, n) if self.constant_depends_on_n else self.published(CR)
+
+    def printed_constant(self, CR: float, n: float = 1.5) -> float:
+        """The constant as the seed paper prints it (the published one unless ``printed``)."""
+        return self.printed(CR) if self.printed is not None else self.constant(CR, n)
+
+    def kernel(self, zeta: float, n: float, approaching: bool):
+        """Scaled ``f(d, u) -> (force, power)`` of the branch (see :class:`ForceShape`)."""
+        if zeta == 0.0 or not self.dashpot_acts(approaching):
+            return elastic_kernel(n)
+        return self.shape.scaled_kernel(zeta, n)
+
+    def separation_function(self, zeta: float, n: float, pulled: bool = False):
+        """Scaled ``g(d, u)``, > 0 in contact, of the restitution branch.
+
+        The contact ends where ``d`` reaches 0, or where the raw force does first: for a
+        ``"force"`` law whenever ``zeta > 0``, for a ``"force_when_pulled"`` law only with
+        ``pulled`` (an external pull; in a free impact the Hertz-damp factor decays towards
+        0 without reaching it, where round-off alone would flip its sign).
+        """
+        release = None
+        if zeta > 0.0 and (self.separation == FORCE or (self.separation == FORCE_WHEN_PULLED and pulled)):
+            release = self.shape.release(zeta, n)
+        if release is None:
+            def g(d, u):
+                return d
+            return g
+
+        def g(d, u):
+            if d <= 0.0:
+                return d
+            return min(d, release(d, u))
+        return g
+
+
+LAWS = MappingProxyType({spec.name: spec for spec in (
+    LawSpec("hertz", ELASTIC, NONE, PENETRATION, zeta_elastic,
+            "Hertz (elastic), zeta = 0", "Hertz (elastic)"),
+    LawSpec("kelvin_voigt", DASHPOT, ALWAYS, FORCE, zeta_kelvin_voigt,
+            "-ln CR / sqrt(pi^2 + ln^2 CR), Anagnostopoulos, seed Eq 2.3", "Eq 2.3 Anagnostopoulos"),
+    LawSpec("jankowski", DASHPOT, APPROACH, PENETRATION, zeta_jankowski,
+            "9 sqrt5 (1-CR^2) / (2 CR (CR(9pi-16)+16)), Jankowski 2006, Eq 2.4", "Eq 2.4 Jankowski",
+            opensees="JankowskiImpact"),
+    LawSpec("barros2013", DASHPOT, APPROACH, PENETRATION, zeta_barros2013,
+            "Eq 2.5 as printed, \"Barros et al. 2013\"", "Eq 2.5 Barros 2013", opensees="JankowskiImpact"),
+    LawSpec("hertzdamp", HERTZDAMP, ALWAYS, FORCE_WHEN_PULLED, zeta_hertzdamp,
+            "3 (1 - CR^2) / 4, Muthukumar & DesRoches 2006, Eq 2.6", "Eq 2.6 Muthukumar-DesRoches",
+            opensees="Hertzdamp"),
+    LawSpec("ye", HERTZDAMP, ALWAYS, FORCE_WHEN_PULLED, zeta_ye,
+            "8 (1 - CR) / (5 CR), Ye, Li & Zhu 2009, Eq 2.7", "Eq 2.7 Ye", opensees="Hertzdamp"),
+    LawSpec("naderpour2013", HERTZDAMP, ALWAYS, FORCE_WHEN_PULLED, zeta_naderpour2013,
+            "2 / (5 CR^2) sqrt((1-CR)/(1+CR)), Eq 2.8 as printed, divided by k", "Eq 2.8 Naderpour 2013",
+            opensees="Hertzdamp"),
+    LawSpec("hunt_crossley", HERTZDAMP, ALWAYS, FORCE_WHEN_PULLED, zeta_hunt_crossley,
+            "3 (1 - CR) / 2, Hunt & Crossley 1975", "Hunt-Crossley 1975", opensees="Hertzdamp"),
+    LawSpec("gonthier", HERTZDAMP, ALWAYS, FORCE_WHEN_PULLED, zeta_gonthier,
+            "(1 - CR^2) / CR, Gonthier et al. 2004", "Gonthier 2004", opensees="Hertzdamp"),
+    LawSpec("crvk", CRVK, APPROACH, PENETRATION, crvk_constant,
+            "A(CR, n) calibrated (crvk_constant); printed: 0.0159 (1 - CR) CR^0.2805, seed Eq 3.9",
+            "Eq 3.9 crvk (printed constant)", printed=crvk_printed_constant, constant_depends_on_n=True),
+)})
+
+#: every law's name, in the order of the table (the ``model`` parameter's allowed values)
+MODELS = tuple(LAWS)
+#: laws of the form k delta^n + c(delta) delta_dot
+DASHPOT_MODELS = tuple(name for name, spec in LAWS.items() if spec.shape is DASHPOT)
+#: laws of the form k delta^n (1 + zeta delta_dot / v_imp)
+HERTZDAMP_MODELS = tuple(name for name, spec in LAWS.items() if spec.shape is HERTZDAMP)
+#: laws whose dissipative term acts only while the bodies approach (delta_dot > 0)
+APPROACH_ONLY_MODELS = tuple(name for name, spec in LAWS.items() if spec.approach_only)
+#: laws with a free damping constant (everything except the elastic Hertz law)
+DAMPED_MODELS = tuple(name for name, spec in LAWS.items() if spec.damped)
+#: laws whose raw force can turn negative in restitution (clipped at 0: the bodies may part early)
+CLIPPED_MODELS = tuple(name for name, spec in LAWS.items() if spec.clipped)
+
+
+def law_spec(model: str) -> LawSpec:
+    """The table entry of ``model``; a ValueError naming the allowed values for any other name."""
+    try:
+        return LAWS[model]
+    except (KeyError, TypeError):
+        raise ValueError(f"model = {model!r} is not allowed: one of {', '.join(MODELS)}") from None
+
+
+def _check_model(model: str) -> str:
+    law_spec(model)
+    return model
+
+
+def published_zeta(model: str, CR: float, n: float = 1.5) -> float:
+    """Dimensionless damping constant of ``model`` for restitution ``CR`` by its published formula.
+
+    The formulas are the table's (:data:`LAWS`, ``LawSpec.source``)::
+
+        hertz           0                                        Hertz (elastic)
+        kelvin_voigt    -ln CR / sqrt(pi^2 + ln^2 CR)            Anagnostopoulos, seed Eq 2.3
+        jankowski       9 sqrt5 (1-CR^2) / (2 CR (CR(9pi-16)+16))  Jankowski 2006, Eq 2.4
+        barros2013      Eq 2.5 as printed                        "Barros et al. 2013"
+        hertzdamp       3 (1 - CR^2) / 4                         Muthukumar & DesRoches 2006, Eq 2.6
+        ye              8 (1 - CR) / (5 CR)                      Ye, Li & Zhu 2009, Eq 2.7
+        naderpour2013   2 / (5 CR^2) sqrt((1-CR)/(1+CR))         Eq 2.8 as printed, divided by k
+        hunt_crossley   3 (1 - CR) / 2                           Hunt & Crossley 1975
+        gonthier        (1 - CR^2) / CR                          Gonthier et al. 2004
+        crvk            A(CR, n) calibrated                      :func:`crvk_constant`
+
+    For the Hertz-damp family the value is ``chi * v_imp`` (``chi`` in s/m).  ``n`` only
+    matters for crvk, whose constant is calibrated for the exponent in use.
+    """
+    return law_spec(model).constant(CR, n)
+
+
+def published_label(model: str) -> str:
+    """Report label of ``model`` with its published constant (ValueError for an unknown name)."""
+    return law_spec(model).label
+
+
+# ----------------------------------------------------------------------------------------------
 # the force laws
 # ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -238,7 +581,7 @@ class ContactLaw:
     Parameters
     ----------
     model : str
-        One of :data:`MODELS`.
+        One of :data:`MODELS` (its entry of :data:`LAWS` is ``spec``).
     k : float
         Contact stiffness [N/m^n].
     n : float
@@ -277,9 +620,10 @@ class ContactLaw:
     n: float
     m: float
     zeta: float
+    spec: LawSpec = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        _check_model(self.model)
+        object.__setattr__(self, "spec", law_spec(self.model))
         for name in ("k", "n", "m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -287,22 +631,28 @@ class ContactLaw:
         if not (math.isfinite(self.zeta) and self.zeta >= 0.0):
             raise ValueError(f"zeta = {self.zeta!r} is outside the allowed range zeta >= 0")
 
+    def __reduce__(self):   # pickled by name: the table entry is looked up again
+        return ContactLaw, (self.model, self.k, self.n, self.m, self.zeta)
+
+    def __deepcopy__(self, memo):   # immutable: an FMU state copy shares it
+        return self
+
     # -- dashpot rules ------------------------------------------------------------------------
     @property
     def approach_only(self) -> bool:
         """True if the dissipative term acts only while ``delta_dot > 0``."""
-        return self.model in APPROACH_ONLY_MODELS
+        return self.spec.approach_only
 
     @property
     def releases_before_unloading(self) -> bool:
         """True if, in an isolated impact, the force reaches zero while ``delta > 0``.
 
-        Only the Kelvin-Voigt dashpot does (``k delta^n + c delta_dot`` crosses zero in
-        restitution).  For the Hertz-damp family ``w = 1 + zeta delta_dot / v_imp`` obeys
-        ``dw/dt = -(zeta k delta^n / (m v_imp)) w``,
+        Only a dashpot acting in restitution does (``k delta^n + c delta_dot`` crosses zero
+        in restitution: separation rule ``"force"``).  For the Hertz-damp family
+        ``w = 1 + zeta delta_dot / v_imp`` obeys ``dw/dt = -(zeta k delta^n / (m v_imp)) w``,
         so ``w`` decays but never changes sign: contact ends at ``delta = 0``.
         """
-        return self.model == "kelvin_voigt" and self.zeta > 0.0
+        return self.spec.separation == FORCE and self.zeta > 0.0
 
     def length_scale(self, v_imp: float) -> float:
         """``L = (m v_imp^2 / k)^(1/(n+1))`` [m]: penetration scale of an impact at ``v_imp``."""
@@ -326,24 +676,10 @@ class ContactLaw:
         if approaching is None:
             approaching = delta_dot > 0.0
         d = delta if delta > 0.0 else 0.0
-        model, k, n = self.model, self.k, self.n
-        spring = k * d ** n
-        if model == "hertz" or self.zeta == 0.0:
+        spring = self.k * d ** self.n
+        if self.zeta == 0.0 or not self.spec.dashpot_acts(approaching):
             return spring
-        if model in DASHPOT_MODELS:
-            if model != "kelvin_voigt" and not approaching:
-                return spring
-            c = 2.0 * self.zeta * math.sqrt(k * self.m * _pow_or_limit(d, n - 1.0))
-            return spring + c * delta_dot
-        if model in HERTZDAMP_MODELS:
-            if v_imp <= 0.0:
-                return spring
-            return spring * (1.0 + self.zeta * delta_dot / max(v_imp, MIN_IMPACT_SPEED))
-        # crvk
-        if not approaching:
-            return spring
-        q = self.zeta * k * self.m * v_imp * v_imp * _pow_or_limit(d, n - 1.0)
-        return 0.5 * (spring + math.sqrt(spring * spring + 4.0 * q))
+        return self.spec.shape.raw_force(self, d, spring, delta_dot, v_imp)
 
     def force(self, delta: float, delta_dot: float, v_imp: float,
               approaching: bool | None = None) -> float:
@@ -369,29 +705,13 @@ class ContactLaw:
         F = self.raw_force(delta, delta_dot, v_imp)
         if F <= 0.0:
             return 0.0, 0.0, 0.0
-        model, k, n, d, z = self.model, self.k, self.n, delta, self.zeta
+        k, n, d = self.k, self.n, delta
         spring = k * d ** n
         dspring = n * k * d ** (n - 1.0)
-        if model == "hertz" or z == 0.0:
+        if self.zeta == 0.0 or not self.spec.dashpot_acts(delta_dot > 0.0):
             return F, dspring, 0.0
-        if model in DASHPOT_MODELS:
-            if model != "kelvin_voigt" and delta_dot <= 0.0:
-                return F, dspring, 0.0
-            c = 2.0 * z * math.sqrt(k * self.m * d ** (n - 1.0))
-            dc = 0.5 * (n - 1.0) * c / d
-            return F, dspring + dc * delta_dot, c
-        if model in HERTZDAMP_MODELS:
-            if v_imp <= 0.0:
-                return F, dspring, 0.0
-            chi = z / max(v_imp, MIN_IMPACT_SPEED)
-            return F, dspring * (1.0 + chi * delta_dot), spring * chi
-        if delta_dot <= 0.0:
-            return F, dspring, 0.0
-        a = z * k * self.m * v_imp * v_imp
-        q = a * d ** (n - 1.0)
-        dq = (n - 1.0) * a * d ** (n - 2.0)
-        root = math.sqrt(spring * spring + 4.0 * q)
-        return F, 0.5 * (dspring + (spring * dspring + 2.0 * dq) / root), 0.0
+        dF_dd, dF_dv = self.spec.shape.derivatives(self, d, spring, dspring, delta_dot, v_imp)
+        return F, dF_dd, dF_dv
 
 
 def _pow_or_limit(d: float, p: float) -> float:
@@ -412,11 +732,11 @@ def effective_mass(m1: float, m2: float) -> float:
 def law_for(model: str, k: float, n: float, m1: float, m2: float, CR: float,
             zeta: float | None = None) -> ContactLaw:
     """Build the :class:`ContactLaw` of ``model``; ``zeta`` None or < 0 -> :func:`published_zeta`."""
-    _check_model(model)
+    spec = law_spec(model)
     CR = _check_cr(CR)
     if zeta is None or zeta < 0.0:
-        zeta = published_zeta(model, CR, n)
-    if model == "hertz":
+        zeta = spec.constant(CR, n)
+    if not spec.damped:
         zeta = 0.0
     return ContactLaw(model=model, k=float(k), n=float(n), m=effective_mass(m1, m2), zeta=float(zeta))
 
@@ -426,23 +746,10 @@ def scaled_force(model: str, zeta: float, n: float, d: float, dd: float,
     """Dimensionless force ``F / (k L^n)`` at ``d = delta / L``, ``dd = delta_dot / v_imp``.
 
     Same law as :meth:`ContactLaw.force` in the scales of an impact at ``v_imp``
-    (module docstring); clipped at 0.  Used by the in-step impact resolver.
+    (module docstring); clipped at 0: the resolver's kernel (:meth:`LawSpec.kernel`).
     """
     if d <= 0.0:
         return 0.0
     if approaching is None:
         approaching = dd > 0.0
-    spring = d ** n
-    if zeta == 0.0 or model == "hertz":
-        return spring
-    if model in HERTZDAMP_MODELS:
-        f = spring * (1.0 + zeta * dd)
-    elif model == "crvk":
-        if not approaching:
-            return spring
-        f = 0.5 * (spring + math.sqrt(spring * spring + 4.0 * zeta * d ** (n - 1.0)))
-    else:
-        if not approaching and model != "kelvin_voigt":
-            return spring
-        f = spring + 2.0 * zeta * d ** (0.5 * (n - 1.0)) * dd
-    return f if f > 0.0 else 0.0
+    return law_spec(model).kernel(zeta, n, approaching)(d, dd)[0]

@@ -19,7 +19,8 @@ class does the FMI bookkeeping that pythonfmu leaves to the author:
   instance continues exactly as the saved one;
 * the modelDescription gets units, ``UnitDefinitions``, min/max, and every output is
   ``initial="calculated"`` (computed when initialisation ends) and listed in
-  ``ModelStructure/InitialUnknowns``, which pythonfmu alone leaves out.
+  ``ModelStructure/InitialUnknowns``, which pythonfmu alone leaves out; its description
+  states what the host's Python must provide (:data:`HOST_REQUIREMENTS`).
 
 Nothing here is mutable at module or class level: every FMU of a process
 shares one Python interpreter.
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import math
+import sys
 import traceback
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
@@ -39,6 +41,17 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
+
+#: what every FMU of the package imports from the host's Python besides the standard library
+#: (pythonfmu travels inside the FMU); written into each FMU as resources/requirements.txt
+HOST_REQUIREMENTS = ("numpy>=1.24", "scipy>=1.11")
+
+
+def host_requirements_text() -> str:
+    """One sentence for the modelDescription: the host Python's version and packages."""
+    names = " and ".join(r.split(">")[0].split("=")[0] for r in HOST_REQUIREMENTS)
+    return (f"Needs a Python {sys.version_info[0]}.{sys.version_info[1]} host with {names} "
+            f"(resources/requirements.txt: {', '.join(HOST_REQUIREMENTS)})")
 
 
 @dataclass(frozen=True)
@@ -143,7 +156,7 @@ class SlaveBase(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.description = self.DESCRIPTION
+        self.description = f"{self.DESCRIPTION}. {host_requirements_text()}"
         start, stop, step = self.DEFAULT_EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self._error: str | None = None

@@ -1,7 +1,7 @@
 """ground_motion.fmu: plays a recorded ground acceleration (a source, no inputs).
 
 The record (``fmu_src/ground_records.py``) is loaded once, at the end of initialisation:
-a bundled name (shipped inside the FMU as ``resources/fmu_src/records``) or a file path
+a bundled name (shipped inside the FMU as ``resources/<its package>/records``) or a file path
 (PEER ``.AT2``, single column with ``dt``, or ``time, acceleration`` CSV).  A bad file makes
 ``fmi2ExitInitializationMode`` fail with a message naming the file and the line.
 
@@ -23,9 +23,9 @@ from pathlib import Path
 
 from pythonfmu.enums import Fmi2Status
 
-from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
-from fmu_src.ground_records import FORMATS, G, MAX_PGA_G, UNITS, record_from_parameters, scaling_conflict
-from fmu_src.response_spectrum import DEFAULT_DAMPING, PERIOD_LIMITS, pseudo_acceleration
+from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
+from .ground_records import FORMATS, G, MAX_PGA_G, UNITS, record_from_parameters, scaling_conflict
+from .response_spectrum import DEFAULT_DAMPING, PERIOD_LIMITS, pseudo_acceleration
 
 
 class GroundMotion(Fmi2Slave):
@@ -106,9 +106,14 @@ class GroundMotion(Fmi2Slave):
         self.dg = record.displacement(t)
 
     def _records_dir(self) -> Path | None:
-        """This FMU's own bundled records (``resources/fmu_src/records``), if it has them."""
+        """This FMU's own bundled records (``resources/<package>/records``), if it has them.
+
+        Taken from the resources folder of this instance, not from the module's ``__file__``:
+        a module imported by an earlier instance of the FMU may come from a folder the host
+        has deleted since (``fmpy.simulate_fmu`` does).
+        """
         if self.resources:
-            folder = Path(self.resources) / "fmu_src" / "records"
+            folder = Path(self.resources) / __package__ / "records"
             if folder.is_dir():
                 return folder
         return None

@@ -1,23 +1,24 @@
-"""pounding.fmu: contact element between two bodies (thin FMI adapter over fmu_src.impact).
+"""pounding.fmu: contact element between two bodies (thin FMI adapter over fmu_src.resolver).
 
 Body 1 lies on the negative side of body 2; ``delta = x1 - x2 - gap`` > 0 is penetration.
 The output force ``F`` (>= 0) pushes body 1 towards -x and body 2 towards +x.
 
 With ``resolve_impacts = true`` (default) every impact is located and integrated inside the
-step at its own time scale (:class:`fmu_src.impact.ImpactResolver`) and ``F`` is the mean
+step at its own time scale (:class:`fmu_src.resolver.ImpactResolver`) and ``F`` is the mean
 force of the step (``F * h`` = impulse), so the momentum and energy handed to the bodies do
 not depend on where the communication points fall.  The resolver follows the host: the
 structures' own contribution to the relative motion (storey springs, dampers) is measured
 from the inputs of consecutive steps, predicted over the next step and corrected, so that
 contacts lasting several steps stay on the host's trajectory; for free masses it is zero.  With ``false`` the force law is
-evaluated on the current inputs only (:class:`fmu_src.impact.PlainContact`).
+evaluated on the current inputs only (:class:`fmu_src.plain_contact.PlainContact`).
 See docs/contact_models.md for the models and the in-step rules.
 """
 from __future__ import annotations
 
-from fmu_src.contact_laws import MODELS, law_for
-from fmu_src.fmi_slave import SlaveBase as Fmi2Slave, Variable
-from fmu_src.impact import ImpactResolver, PlainContact
+from .contact_laws import MODELS, law_for
+from .fmi_slave import SlaveBase as Fmi2Slave, Variable
+from .plain_contact import PlainContact
+from .resolver import ImpactResolver
 
 _OUT = dict(causality="output")
 

@@ -14,7 +14,7 @@ if str(ROOT) not in sys.path:
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory) -> Path:
     """Folder holding every FMU, built from the current sources for this session."""
-    from build_fmu import build_all
+    from cosim.fmus import build_all
 
     out = tmp_path_factory.mktemp("fmus")
     build_all(out)
@@ -34,7 +34,7 @@ def fmu_path(fmu_dir):
 @pytest.fixture(scope="module")
 def catalog(fmu_dir):
     """The session's FMUs loaded once per test module (``cosim.master.Catalog``)."""
-    from cosim.master import Catalog
+    from cosim.master.system import Catalog
 
     with Catalog(fmu_dir) as cat:
         yield cat
@@ -52,7 +52,7 @@ def pytest_unconfigure(config):
     """End the test process like the command-line tools do (cosim.fmi.exit_process): once
     pythonfmu libraries are loaded, a normal interpreter exit can abort on a corrupted heap
     after every test has passed, and CI would read exit code 134."""
-    from cosim.fmi import exit_process, libraries_loaded
+    from cosim.master.fmi import exit_process, libraries_loaded
 
     if libraries_loaded() and _EXIT_STATUS:
         exit_process(_EXIT_STATUS[-1])

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.run import run_scene
+from cosim.master.runner import run_scene
 
 
 def run(name, fmu_dir, overrides=(), **kwargs):
@@ -13,8 +13,9 @@ def run(name, fmu_dir, overrides=(), **kwargs):
 
 def simulate_scene(catalog, scene, overrides=(), **options):
     """Load ``scene`` (name, path or dict) with ``overrides`` and simulate it on ``catalog``'s FMUs."""
-    from cosim.master import System, simulate
-    from cosim.scene import load_scene
+    from cosim.master.simulate import simulate
+    from cosim.master.system import System
+    from cosim.master.loader import load_scene
 
     loaded = load_scene(scene, list(overrides), catalog)
     with System(loaded, catalog) as system:
@@ -54,11 +55,11 @@ def assert_contact_work_reaches_the_floors(result, scene):
 def assert_energy_balance(summary, tolerance=0.01):
     """E_initial + E_input = kinetic + strain + structural damping + contact dissipation,
     within ``tolerance`` of the input energy (the residual holds the coupling error)."""
-    total_in = summary["energy_input_J"]
+    total_in = summary.energy_input_J
     assert total_in > 0
-    assert abs(summary["energy_residual_J"]) <= tolerance * total_in, (
-        f"energy residual {summary['energy_residual_J']:.4g} J = "
-        f"{100 * summary['energy_residual_relative']:.3g} % of the input {total_in:.4g} J")
+    assert abs(summary.energy_residual_J) <= tolerance * total_in, (
+        f"energy residual {summary.energy_residual_J:.4g} J = "
+        f"{100 * summary.energy_residual_relative:.3g} % of the input {total_in:.4g} J")
 
 
 def assert_record_scene(run_result, target_pga=2.942):
@@ -68,6 +69,6 @@ def assert_record_scene(run_result, target_pga=2.942):
     assert r["ground.pga"][-1] == __import__("pytest").approx(target_pga, rel=1e-12)
     # the buildings see the scaled record: no sample above its PGA
     assert np.abs(r["ground.ag_mean"]).max() <= target_pga * (1 + 1e-12)
-    assert s["impacts"] >= 1 and s["peak_force_N"] > 0
-    assert s["energy_input_J"] > 0
+    assert s.impacts >= 1 and s.peak_force_N > 0
+    assert s.energy_input_J > 0
     assert_contact_work_reaches_the_floors(r, run_result.scene)

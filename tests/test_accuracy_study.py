@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from cosim.accuracy import REDUCED_FAMILIES, Row, markdown, run_study, score, write_study
-from cosim.master import Catalog
+from cosim.apps.accuracy import REDUCED_FAMILIES, Row, markdown, run_study, score, write_study
+from cosim.master.system import Catalog
 
 
 @pytest.fixture(scope="module")

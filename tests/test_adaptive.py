@@ -6,12 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from cosim.adaptive import Adaptive, InstabilityError, StabilityGuard, closure_time
-from cosim.coupling import STRATEGIES, get_strategy
-from cosim.master import System, simulate
-from cosim.reference import reference_for_scene
-from cosim.results import energy_history
-from cosim.scene import load_scene
+from cosim.master.coupling.adaptive import Adaptive, closure_time
+from cosim.master.guard import InstabilityError, StabilityGuard
+from cosim.master.coupling import STRATEGIES, get_strategy
+from cosim.master.simulate import simulate
+from cosim.master.system import System
+from cosim.peers.reference import reference_for_scene
+from cosim.master.results import energy_history
+from cosim.master.loader import load_scene
 from scenario_checks import simulate_scene as run
 
 PLAIN_ADAPTIVE = ['coupling="adaptive"', "pounding.resolve_impacts=false"]
@@ -66,11 +68,11 @@ def test_steps_are_aligned_dyadic_fractions(short_default):
 def test_counters(short_default):
     result = short_default
     # each instance steps once per accepted step plus once per rejected one
-    for name, count in result.do_steps.items():
-        assert count == result.communication_steps + result.rollbacks, name
-    assert result.communication_steps == result.time.size - 1
+    for name, count in result.cost.do_steps.items():
+        assert count == result.cost.communication_steps + result.cost.rollbacks, name
+    assert result.cost.communication_steps == result.time.size - 1
     assert result.stats["missed_events"] == 0
-    assert result.fmu_calls > 4 * result.communication_steps
+    assert result.cost.fmu_calls > 4 * result.cost.communication_steps
 
 
 def test_energy_balance_closes(short_default):
@@ -121,14 +123,14 @@ def test_rollback_when_the_prediction_fails(catalog):
     overrides = PLAIN_ADAPTIVE + ["stop_time=4.2"]
     late = run(catalog, "default", overrides, strategy=LatePrediction, risk_factor=1e9)
     normal = run(catalog, "default", overrides)
-    assert late.rollbacks >= 3           # at least one per impact
+    assert late.cost.rollbacks >= 3           # at least one per impact
     assert late.stats["missed_events"] == 0
     assert late["pounding_3.impacts"][-1] == normal["pounding_3.impacts"][-1] == 3
     # both first order in the same contact step: the same impacts to 1 %
     assert late["pounding_3.F_max"][-1] == pytest.approx(normal["pounding_3.F_max"][-1], rel=0.01)
     assert late["pounding_3.E_dissipated"][-1] == pytest.approx(normal["pounding_3.E_dissipated"][-1], rel=0.01)
-    for name, count in late.do_steps.items():
-        assert count == late.communication_steps + late.rollbacks, name
+    for name, count in late.cost.do_steps.items():
+        assert count == late.cost.communication_steps + late.cost.rollbacks, name
     # a restored step leaves no trace: the energy balance still closes to round-off
     e = energy_history(late)
     open_ = late["pounding_3.F"] == 0.0
@@ -170,19 +172,19 @@ def test_guard_stops_a_plain_law_that_cannot_resolve_the_impacts_and_warns_below
     assert info.value.reason == "resolution" and info.value.instance == "pounding_3"
     assert "resolve_impacts=true" in str(info.value) and "step below" in str(info.value)
 
-    from cosim.results import summarize
+    from cosim.master.results import summarize
     result = run(catalog, "default", plain, strategy="gauss-seidel", step=0.002)
     summary = summarize(result)
-    ratio = summary["contacts"]["pounding_3"]["step_over_time_scale"]
+    ratio = summary.contacts["pounding_3"].step_over_time_scale
     assert 0.02 < ratio < StabilityGuard.max_step_over_time_scale
-    assert len(summary["warnings"]) == 1 and f"{ratio:.0%}" in summary["warnings"][0]
+    assert len(summary.warnings) == 1 and f"{ratio:.0%}" in summary.warnings[0]
     ref = reference_for_scene(result.scene, {"rtol": 1e-9})
-    error = abs(summary["dissipated_energy_J"] / ref.dissipated_energy_J - 1.0)
+    error = abs(summary.dissipated_energy_J / ref.dissipated_energy_J - 1.0)
     # the estimate is an order of magnitude, not a bound: within a factor 2 either way
     assert 0.5 * ratio < error < 2.0 * ratio
     # resolved impacts at the same step: no plain contact, nothing to warn about
     resolved = summarize(run(catalog, "default", ["stop_time=4.2"], strategy="gauss-seidel", step=0.002))
-    assert resolved["warnings"] == [] and "step_over_time_scale" not in resolved["contacts"]["pounding_3"]
+    assert resolved.warnings == [] and resolved.contacts["pounding_3"].step_over_time_scale is None
 
 
 def test_guard_flags_non_finite_and_energy(catalog):

@@ -12,10 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from cosim.calibrate import (CalibrationError, FMURunner, ImpactCase, _fmu_root, calibrate, calibrate_stiffness,
-                             main, write_outputs)
+from cosim.apps.calibrate import (CalibrationError, FMURunner, ImpactCase, _fmu_root, calibrate, calibrate_stiffness,
+                             write_outputs)
+from cosim.cli import main as cli_main
 from fmu_src.contact_laws import DAMPED_MODELS, ContactLaw
-from fmu_src.impact import goldsmith_loss, simulate_impact
+from fmu_src.single_impact import goldsmith_loss, simulate_impact
 
 # Issue 5 acceptance: CR within 0.002 and loop area within 0.1 % of Goldsmith's loss.
 CR_TOL = 0.002
@@ -184,12 +185,12 @@ def test_peak_force_outside_stiffness_bounds():
 
 
 def test_cli_bad_input_exit_code(capsys):
-    assert main(["--model", "crvk", "--m1", "1", "--m2", "1", "--k", "0", "--v", "1", "--cr", "0.5", "--no-fmu"]) == 2
+    assert cli_main(["calibrate", "--model", "crvk", "--m1", "1", "--m2", "1", "--k", "0", "--v", "1", "--cr", "0.5", "--no-fmu"]) == 2
     assert "k = 0.0 N/m^n is outside the allowed range k > 0" in capsys.readouterr().err
 
 
 def test_cli_physics_level(capsys, tmp_path):
-    assert main(["--model", "jankowski", "--m1", "300", "--m2", "300", "--k", "4e8", "--v", "0.68", "--cr", "0.6",
+    assert cli_main(["calibrate", "--model", "jankowski", "--m1", "300", "--m2", "300", "--k", "4e8", "--v", "0.68", "--cr", "0.6",
                  "--no-fmu", "--out", str(tmp_path / "o"), "--no-plots"]) == 0
     text = capsys.readouterr().out
     assert "calibrated zeta" in text and "Goldsmith loss" in text

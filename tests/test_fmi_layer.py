@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.fmi import FMU, FMUError
+from cosim.master.fmi import FMU, FMUError
 
 
 @pytest.fixture(scope="module")
@@ -125,3 +125,24 @@ def test_fmu_state_rollback(building):
         inst.free_state(state)
     finally:
         inst.free()
+
+
+def test_the_declared_interfaces_are_the_built_fmus(fmu_dir):
+    """The scene loader and the parameter defaults read the slaves' declarations when no FMU is at
+    hand: they must say what the built FMUs' model descriptions say (the descriptions round
+    start values to 16 significant digits: half a unit of the 16th digit is 5e-16 relative)."""
+    from cosim.master.interface import interfaces, parameter_defaults
+
+    built, declared = interfaces(fmu_dir), interfaces(None)
+    assert built.keys() == declared.keys()
+    for name in built:
+        b, d = built[name].variables, declared[name].variables
+        assert list(b) == list(d), name
+        for var in b:
+            assert (b[var].type, b[var].causality, b[var].variability, b[var].unit) == \
+                   (d[var].type, d[var].causality, d[var].variability, d[var].unit), (name, var)
+            if b[var].type == "Real" and b[var].start is not None:
+                assert b[var].start == pytest.approx(d[var].start, rel=5e-16, abs=0.0), (name, var)
+            else:
+                assert b[var].start == d[var].start, (name, var)
+        assert dict(parameter_defaults(name)) == {v: d[v].start for v in d if d[v].causality == "parameter"}

@@ -22,7 +22,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
 
-from build_fmu import CAPABILITIES, FMUS
+from cosim.fmus import CAPABILITIES, FMUS
 
 NAMES = [spec.name for spec in FMUS]
 

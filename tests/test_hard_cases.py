@@ -21,12 +21,13 @@ import math
 import numpy as np
 import pytest
 
-from cosim.adaptive import InstabilityError
-from cosim.master import System, simulate
-from cosim.reference import reference_for_scene
-from cosim.scene import load_scene
+from cosim.master.guard import InstabilityError
+from cosim.master.simulate import simulate
+from cosim.master.system import System
+from cosim.peers.reference import reference_for_scene
+from cosim.master.loader import load_scene
 from fmu_src.contact_laws import law_for
-from fmu_src.impact import simulate_impact
+from fmu_src.single_impact import simulate_impact
 from scenario_checks import simulate_scene as run
 
 
@@ -148,7 +149,7 @@ def test_step_ten_times_the_contact_duration(catalog):
     approach-only damping shortens it (solve_ivp: 0.353 ms)."""
     from scipy.special import beta
 
-    from fmu_src.impact import goldsmith_loss
+    from fmu_src.single_impact import goldsmith_loss
 
     m, k, n, v, CR = 100.0, 1.8974e11, 1.5, 10.0, 0.4     # effective mass of 200 kg + 200 kg
     delta_max = ((n + 1.0) * m * v * v / (2.0 * k)) ** (1.0 / (n + 1.0))
@@ -309,7 +310,7 @@ def test_300_second_run_has_no_energy_drift(catalog, resolve):
     with System(loaded, catalog) as system:
         result = simulate(system, progress=False)
     check_physical(result)
-    from cosim.results import energy_history
+    from cosim.master.results import energy_history
 
     e = energy_history(result)
     scale = float(np.max(np.abs(e["input"])))

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.opensees_peer import model_description, opensees_available, run_opensees
-from cosim.reference import Contact, solve_reference
+from cosim.peers.opensees import model_description, opensees_available, run_opensees
+from cosim.peers.reference import Contact, solve_reference
 from fmu_src.contact_laws import law_for
 from fmu_src.ground_records import Record
 from fmu_src.shear_building import ShearBuilding

@@ -2,7 +2,7 @@
 
 The host is exact for free masses under the piecewise-constant force the FMU returns
 (zero-order hold): x += v h -/+ F h^2 / (2 m), v -/+= F h / m.  The reference is
-fmu_src.impact.simulate_impact (scipy DOP853, rtol 1e-10, events), an integrator
+fmu_src.single_impact.simulate_impact (scipy DOP853, rtol 1e-10, events), an integrator
 independent of the FMU's internal Dormand-Prince resolver.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ import math
 import pytest
 
 from fmu_src.contact_laws import MODELS, law_for
-from fmu_src.impact import simulate_impact
+from fmu_src.single_impact import simulate_impact
 
 fmpy = pytest.importorskip("fmpy")
 from fmpy import calloc, extract, free, read_model_description  # noqa: E402

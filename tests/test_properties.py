@@ -14,7 +14,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from fmu_src.contact_laws import MODELS, law_for
-from fmu_src.impact import ImpactResolver, simulate_impact
+from fmu_src.resolver import ImpactResolver
+from fmu_src.single_impact import simulate_impact
 
 models = st.sampled_from(MODELS)
 restitution = st.floats(0.05, 1.0)

@@ -3,8 +3,8 @@ from pathlib import Path
 
 import pytest
 
-from build_fmu import FMUS
-from cosim.fmu_docs import markdown_table
+from cosim.fmus import FMUS
+from cosim.apps.fmu_docs import markdown_table
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -15,4 +15,4 @@ def test_readme_holds_the_generated_variable_table(fmu_path, name):
     text = README.read_text()
     missing = [line for line in table.splitlines() if line not in text]
     assert not missing, (f"README.md is out of date for {name}.fmu; regenerate with "
-                         f"`python -m cosim.fmu_docs` ({len(missing)} lines differ, first: {missing[0]})")
+                         f"`pounding-cosim fmu-docs` ({len(missing)} lines differ, first: {missing[0]})")

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from cosim.reference import Contact, solve_reference
+from cosim.peers.reference import Contact, solve_reference
 from fmu_src.contact_laws import law_for
 from fmu_src.ground_records import Record
-from fmu_src.impact import simulate_impact
+from fmu_src.single_impact import simulate_impact
 from fmu_src.shear_building import ShearBuilding
 
 K_CONTACT = 1.8974e11   # N/m^1.5, the seed's worked example (6000 kN/mm^1.5)
@@ -192,9 +192,9 @@ def test_bad_input_is_named():
 def test_reference_for_scene_single_impact():
     """The scene adapter builds the FMUs' physics from scene values and FMU start values: the
     seed's worked example (crvk, CR = 0.4, calibrated) loses exactly Goldsmith's 4200 J."""
-    from cosim.reference import reference_for_scene
-    from cosim.scene import load_scene
-    from fmu_src.impact import goldsmith_loss
+    from cosim.peers.reference import reference_for_scene
+    from cosim.master.loader import load_scene
+    from fmu_src.single_impact import goldsmith_loss
 
     scene = load_scene({
         "name": "single", "stop_time": 0.02, "step": 2e-5,

@@ -6,7 +6,7 @@ import re
 
 import pytest
 
-from cosim.report import COMMAND, build_report
+from cosim.apps.report import COMMAND, build_report
 
 FIGURES = ("fig1_hysteresis.png", "fig5_worked_example.png", "fig6_cr_accuracy.png", "fig7_experiment.png",
            "fig7b_experiment_sensitivity.png", "fig8a_gap.png", "fig8b_velocity.png", "fig8c_cr.png")

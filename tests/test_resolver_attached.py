@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from cosim.reference import Contact, solve_reference
+from cosim.peers.reference import Contact, solve_reference
 from fmu_src.contact_laws import law_for
-from fmu_src.impact import ImpactResolver, simulate_impact
+from fmu_src.resolver import ImpactResolver
+from fmu_src.single_impact import simulate_impact
 from fmu_src.shear_building import ShearBuilding, ZohPropagator
 
 

@@ -9,14 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim import results
-from cosim.run import main, run_scene
+from cosim.master import output
+from cosim.master.scene import SCENES
+from cosim.cli import main as cli_main
+from cosim.master.runner import run_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_cli(capsys, *args):
-    code = main([str(a) for a in args])
+    code = cli_main(["run", *[str(a) for a in args]])
     captured = capsys.readouterr()
     return code, captured.out, captured.err
 
@@ -65,8 +67,8 @@ def test_overrides_and_coupling_reach_the_fmus(tmp_path, fmu_dir):
     run = run_scene("default", ["pounding.gap=0.05", "pounding.CR=0.5", "left.m[1]=2.5e5"], fmu_dir=fmu_dir,
                     stop_time=1.0, coupling="jacobi", step=0.02, write=False, progress=False)
     assert run.scene.contacts[0].parameters["gap"] == 0.05
-    assert run.summary["coupling"] == "jacobi" and run.summary["communication_steps"] == 50
-    assert run.summary["step_s"] == 0.02
+    assert run.summary.coupling == "jacobi" and run.summary.cost.communication_steps == 50
+    assert run.summary.step_s == 0.02
 
 
 def test_bad_input_list(capsys):
@@ -84,7 +86,7 @@ def test_bad_input_is_one_line_before_anything_runs(capsys, tmp_path, fmu_dir, c
     bad = tmp_path / "bad.txt"
     bad.write_text(BAD_RECORD_LINES)
     scene = tmp_path / "s.toml"
-    scene.write_text((ROOT / "scenes" / "default.toml").read_text().replace("stop_time = 40.0", "stop_time = 1.0"))
+    scene.write_text((SCENES / "default.toml").read_text().replace("stop_time = 40.0", "stop_time = 1.0"))
     args, expect = {
         "missing_record": ([scene, "--set", f"ground.record={tmp_path / 'nothere.at2'}"], "nothere.at2"),
         "malformed_record": ([scene, "--set", f"ground.record={bad}", "--set", "ground.dt=0.01"],
@@ -117,15 +119,15 @@ def test_results_folder_is_complete_or_absent(tmp_path, fmu_dir, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(results, "plot_all", broken)
+    monkeypatch.setattr(output, "plot_all", broken)
     with pytest.raises(RuntimeError, match="disk full"):
-        results.write_results(run.result, out)
+        output.write_results(run.result, out)
     assert_nothing_written(out)
     monkeypatch.undo()
-    results.write_results(run.result, out, plots=False)
+    output.write_results(run.result, out, plots=False)
     first = (out / "summary.json").read_text()
     # rewriting replaces the folder as a whole
-    results.write_results(run.result, out, plots=False)
+    output.write_results(run.result, out, plots=False)
     assert (out / "summary.json").read_text() == first
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r"]
 

@@ -4,9 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.master import Catalog, System, simulate
-from cosim.results import impact_times, summarize
-from cosim.scene import load_scene
+from cosim.master.simulate import simulate
+from cosim.master.system import Catalog, System
+from cosim.master.results import impact_times, summarize
+from cosim.master.loader import load_scene
 from scenario_checks import assert_contact_work_reaches_the_floors, assert_energy_balance
 
 
@@ -23,12 +24,12 @@ def default_run(fmu_dir):
 
 def test_only_the_instances_the_scene_calls_for(default_run):
     scene, result, summary, _ = default_run
-    assert summary["instances"] == ["ground", "pounding_3", "left", "right"]
+    assert summary.instances == ["ground", "pounding_3", "left", "right"]
     # adaptive coupling: 10 ms steps while the floors are apart, dyadic refinements only
     # around the impacts (11 here, a handful of extra steps each)
-    steps = summary["communication_steps"]
-    assert summary["stop_time_s"] == 40.0 and 4000 < steps < 4000 + 20 * summary["impacts"]
-    assert result.do_steps == {"ground": steps, "pounding_3": steps, "left": steps, "right": steps}
+    steps = summary.cost.communication_steps
+    assert summary.stop_time_s == 40.0 and 4000 < steps < 4000 + 20 * summary.impacts
+    assert result.cost.do_steps == {"ground": steps, "pounding_3": steps, "left": steps, "right": steps}
     h = np.diff(result.time)
     assert h.max() == pytest.approx(0.01, rel=1e-12) and h.min() < 0.01 / 2
     # every refined step ends within 0.2 s of an impact: before it the predicted closure of the
@@ -36,13 +37,13 @@ def test_only_the_instances_the_scene_calls_for(default_run):
     refined = result.time[1:-1][h[:-1] < 0.01 * (1 - 1e-9)]   # the last step is clipped at stop_time
     onsets = impact_times(result, "pounding_3")
     assert refined.size and np.all(np.min(np.abs(refined[:, None] - onsets[None, :]), axis=1) < 0.2)
-    assert summary["rollbacks"] == 0 and summary["fmu_calls"] > 4 * steps
+    assert summary.cost.rollbacks == 0 and summary.cost.fmu_calls > 4 * steps
 
 
 def test_the_buildings_pound_several_times(default_run):
     _, result, summary, _ = default_run
-    assert summary["impacts"] >= 3
-    assert summary["peak_force_N"] > 0 and summary["dissipated_energy_J"] > 0
+    assert summary.impacts >= 3
+    assert summary.peak_force_N > 0 and summary.dissipated_energy_J > 0
     # the force acts only while the gap is closed somewhere in the step
     force = result["pounding_3.F"]
     assert np.all(force >= 0)
@@ -50,9 +51,9 @@ def test_the_buildings_pound_several_times(default_run):
 
 def test_contact_dissipation_is_what_the_pounding_fmus_report(default_run):
     _, result, summary, reported = default_run
-    assert summary["dissipated_energy_J"] == sum(r["E_dissipated"] for r in reported.values())
-    assert summary["impacts"] == sum(r["impacts"] for r in reported.values())
-    assert summary["energy_contact_J"] == summary["dissipated_energy_J"]
+    assert summary.dissipated_energy_J == sum(r["E_dissipated"] for r in reported.values())
+    assert summary.impacts == sum(r["impacts"] for r in reported.values())
+    assert summary.energy_contact_J == summary.dissipated_energy_J
 
 
 def test_gauss_seidel_hands_the_impulse_over_in_the_same_step(default_run):
@@ -68,8 +69,8 @@ def test_jacobi_runs_with_the_same_counters(fmu_dir):
     from scenario_checks import run
 
     r = run("default", fmu_dir, coupling="jacobi", stop_time=5.0)
-    assert r.summary["coupling"] == "jacobi" and r.summary["communication_steps"] == 500
-    assert set(r.result.do_steps.values()) == {500}
+    assert r.summary.coupling == "jacobi" and r.summary.cost.communication_steps == 500
+    assert set(r.result.cost.do_steps.values()) == {500}
 
 
 def test_system_reset_reuses_the_instances_for_a_new_case(fmu_dir):

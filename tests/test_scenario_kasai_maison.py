@@ -22,10 +22,10 @@ def test_one_contact_instance_per_floor_level(kasai):
 
 
 def test_pounding_at_several_levels(kasai):
-    contacts = kasai.summary["contacts"]
-    assert sum(1 for c in contacts.values() if c["impacts"] > 0) >= 2
+    contacts = kasai.summary.contacts
+    assert sum(1 for c in contacts.values() if c.impacts > 0) >= 2
     # relative floor displacements grow with height: the top level pounds the most
-    assert contacts["pounding_8"]["impacts"] == max(c["impacts"] for c in contacts.values())
+    assert contacts["pounding_8"].impacts == max(c.impacts for c in contacts.values())
 
 
 def test_every_level_hands_its_force_to_its_floors(kasai):

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from cosim.reference import reference_for_scene
-from cosim.results import summarize
-from cosim.scene import load_scene
+from cosim.peers.reference import reference_for_scene
+from cosim.master.results import summarize
+from cosim.master.loader import load_scene
 from scenario_checks import assert_record_scene, run, simulate_scene
 
 
@@ -27,9 +27,9 @@ def test_fixed_step_gauss_seidel_converges_on_the_long_attached_impacts(catalog,
     ref = kobe_reference
     result = simulate_scene(catalog, "kobe", ["coupling=\"gauss-seidel\"", f"step={h}"])
     s = summarize(result)
-    assert s["impacts"] == ref.impacts == 9
+    assert s.impacts == ref.impacts == 9
     # 1 %: the accuracy study's criterion for peak force and dissipated energy
-    assert s["peak_force_N"] == pytest.approx(ref.peak_force_N, rel=0.01)
-    assert s["dissipated_energy_J"] == pytest.approx(ref.dissipated_energy_J, rel=0.01)
+    assert s.peak_force_N == pytest.approx(ref.peak_force_N, rel=0.01)
+    assert s.dissipated_energy_J == pytest.approx(ref.dissipated_energy_J, rel=0.01)
     # the energy balance closes within 0.3 % of the input (0.21 % at 10 ms, 0.05 % at 5 ms)
-    assert abs(s["energy_residual_J"]) <= 0.003 * s["energy_input_J"]
+    assert abs(s.energy_residual_J) <= 0.003 * s.energy_input_J

@@ -17,8 +17,8 @@ def impact(fmu_dir):
 
 
 def test_no_ground_motion_and_one_impact(impact):
-    assert impact.summary["instances"] == ["pounding_1", "left", "right"]
-    assert impact.summary["impacts"] == 1
+    assert impact.summary.instances == ["pounding_1", "left", "right"]
+    assert impact.summary.impacts == 1
 
 
 def test_achieved_restitution_from_the_bodies_velocities(impact):
@@ -35,12 +35,12 @@ def test_achieved_restitution_from_the_bodies_velocities(impact):
 def test_dissipated_energy_is_goldsmiths_loss(impact):
     m_eff = M * M / (M + M)
     goldsmith = 0.5 * m_eff * (1 - CR**2) * V**2         # 4200 J
-    assert impact.summary["dissipated_energy_J"] == pytest.approx(goldsmith, rel=1e-5)  # as CR above
+    assert impact.summary.dissipated_energy_J == pytest.approx(goldsmith, rel=1e-5)  # as CR above
     # what the bodies lost is what the contact dissipated
     r = impact.result
     kinetic = r["left.E_kinetic"] + r["right.E_kinetic"]
-    assert kinetic[0] - kinetic[-1] == pytest.approx(impact.summary["dissipated_energy_J"], rel=1e-9)
-    assert abs(impact.summary["energy_residual_J"]) < 1e-6 * kinetic[0]
+    assert kinetic[0] - kinetic[-1] == pytest.approx(impact.summary.dissipated_energy_J, rel=1e-9)
+    assert abs(impact.summary.energy_residual_J) < 1e-6 * kinetic[0]
 
 
 def test_momentum_is_conserved_at_every_step(impact):

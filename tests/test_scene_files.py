@@ -6,7 +6,8 @@ import textwrap
 
 import pytest
 
-from cosim.scene import SceneError, bundled_scenes, load_scene
+from cosim.master.loader import bundled_scenes, load_scene
+from cosim.master.scene import SceneError
 
 REQUIRED = {"default", "elcentro", "kobe", "sanfernando", "parkfield", "single_impact",
             "free_vibration", "one_building", "kasai_maison"}

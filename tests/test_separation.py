@@ -1,4 +1,4 @@
-"""Separation that avoids pounding (cosim/separation.py): exact answer, code rules, correlation."""
+"""Separation that avoids pounding (cosim/apps/separation.py): exact answer, code rules, correlation."""
 from __future__ import annotations
 
 import math
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_continuous_lyapunov
 
-from cosim.reference import Contact, scene_inputs, solve_reference
-from cosim.scene import load_scene
-from cosim.separation import (RULE_NAMES, RULES, _modal_weights, code_separations, correlation,
+from cosim.peers.reference import Contact, scene_inputs, solve_reference
+from cosim.master.loader import load_scene
+from cosim.apps.separation import (RULE_NAMES, RULES, _modal_weights, code_separations, correlation,
                               peak_displacement, required_separation, separation_estimates,
                               spectral_peak_displacement, uncoupled_separation)
 from fmu_src.ground_records import Record, load_record

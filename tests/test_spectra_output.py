@@ -1,4 +1,4 @@
-"""Spectrum files (cosim/spectra.py): the CSV reads back to the numbers, nothing is overwritten."""
+"""Spectrum files (cosim/apps/spectra.py): the CSV reads back to the numbers, nothing is overwritten."""
 from __future__ import annotations
 
 import csv
@@ -6,7 +6,7 @@ import csv
 import numpy as np
 import pytest
 
-from cosim.spectra import COLUMNS, spectrum_table, write_spectrum
+from cosim.apps.spectra import COLUMNS, spectrum_table, write_spectrum
 from fmu_src.ground_records import G, load_record
 from fmu_src.response_spectrum import default_periods, response_spectrum
 

@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from cosim.master import Catalog, System, simulate
-from cosim.run import main as run_main, run_scene
-from cosim.scene import load_scene
-from cosim.ssp import (NotExpressibleError, OSP_NS, OUR_ANNOTATION, SSC_NS, SSD_NS, SSV_NS, SspWarning, base_unit,
+from cosim.master.simulate import simulate
+from cosim.master.system import Catalog, System
+from cosim.cli import main as cli_main
+from cosim.master.runner import run_scene
+from cosim.master.loader import load_scene
+from cosim.peers.ssp import (NotExpressibleError, OSP_NS, OUR_ANNOTATION, SSC_NS, SSD_NS, SSV_NS, SspWarning, base_unit,
                        export_scene, load_ssp, read_ssp, validate_ssp, write_ssp)
 
 Q = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "osp": OSP_NS}
@@ -28,7 +30,7 @@ Q = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "osp": OSP_NS}
 def exported(fmu_dir, tmp_path_factory):
     """The default scene exported through the command line."""
     path = tmp_path_factory.mktemp("ssp") / "default.ssp"
-    assert run_main(["default", "--export-ssp", str(path), "--fmu-dir", str(fmu_dir)]) == 0
+    assert cli_main(["run", "default", "--export-ssp", str(path), "--fmu-dir", str(fmu_dir)]) == 0
     return path
 
 
@@ -112,16 +114,16 @@ def test_units_are_defined_by_si_base_units(ssd):
 
 
 def test_cli_prints_what_ssp_cannot_express(fmu_dir, tmp_path, capsys):
-    assert run_main(["default", "--export-ssp", str(tmp_path / "d.ssp"), "--fmu-dir", str(fmu_dir)]) == 0
+    assert cli_main(["run", "default", "--export-ssp", str(tmp_path / "d.ssp"), "--fmu-dir", str(fmu_dir)]) == 0
     out = capsys.readouterr().out
     assert "coupling = 'adaptive' is not expressible in SSP 1.0" in out
-    assert run_main(["default", "--coupling", "jacobi", "--export-ssp", str(tmp_path / "j.ssp"),
+    assert cli_main(["run", "default", "--coupling", "jacobi", "--export-ssp", str(tmp_path / "j.ssp"),
                      "--fmu-dir", str(fmu_dir)]) == 0
     assert "not expressible" not in capsys.readouterr().out
 
 
 def test_libcosim_runs_the_exported_package_like_our_jacobi_master(exported, fmu_dir):
-    from cosim.libcosim_runner import run_ssp
+    from cosim.peers.libcosim import run_ssp
 
     observe = ["pounding_3.F_max", "pounding_3.impacts", "pounding_3.E_dissipated", "right.x[3]"]
     lc = run_ssp(exported, observe)
@@ -129,12 +131,12 @@ def test_libcosim_runs_the_exported_package_like_our_jacobi_master(exported, fmu
     mine = run_scene("default", coupling="jacobi", fmu_dir=fmu_dir, write=False, progress=False).summary
     print(f"\nexported .ssp in libcosim: peak {lc['pounding_3.F_max'][-1]:.9g} N, "
           f"{int(lc['pounding_3.impacts'][-1])} impacts, {lc['pounding_3.E_dissipated'][-1]:.9g} J; ours (jacobi): "
-          f"{mine['peak_force_N']:.9g} N, {mine['impacts']} impacts, {mine['dissipated_energy_J']:.9g} J")
-    assert mine["impacts"] >= 5
-    assert int(lc["pounding_3.impacts"][-1]) == mine["impacts"]
+          f"{mine.peak_force_N:.9g} N, {mine.impacts} impacts, {mine.dissipated_energy_J:.9g} J")
+    assert mine.impacts >= 5
+    assert int(lc["pounding_3.impacts"][-1]) == mine.impacts
     # the issue's bound for the same coupling
-    assert lc["pounding_3.F_max"][-1] == pytest.approx(mine["peak_force_N"], rel=1e-3)
-    assert lc["pounding_3.E_dissipated"][-1] == pytest.approx(mine["dissipated_energy_J"], rel=1e-3)
+    assert lc["pounding_3.F_max"][-1] == pytest.approx(mine.peak_force_N, rel=1e-3)
+    assert lc["pounding_3.E_dissipated"][-1] == pytest.approx(mine.dissipated_energy_J, rel=1e-3)
 
 
 def test_round_trip_reproduces_the_original_run_exactly(exported, scene, fmu_dir, tmp_path):
@@ -169,7 +171,7 @@ def test_a_floor_pounded_from_both_sides_is_not_expressible(fmu_dir, tmp_path):
     toml.write_text('name = "row"\nstop_time = 1.0\nstep = 0.01\n[buildings.west]\nm = [3e5, 3e5]\n'
                     'k = [1e8, 1e8]\n[buildings.middle]\nm = [3e5, 3e5]\nk = [1e8, 1e8]\n[buildings.east]\n'
                     'm = [3e5, 3e5]\nk = [1e8, 1e8]\n[pounding]\nfloors = [2]\ngap = 0.03\n')
-    assert run_main([str(toml), "--export-ssp", str(tmp_path / "row.ssp"), "--fmu-dir", str(fmu_dir)]) == 2
+    assert cli_main(["run", str(toml), "--export-ssp", str(tmp_path / "row.ssp"), "--fmu-dir", str(fmu_dir)]) == 2
     assert not (tmp_path / "row.ssp").exists()
 
 

@@ -11,11 +11,14 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from types import SimpleNamespace
+from dataclasses import replace
 
 import pytest
 
-from cosim.study import (StudyError, case_id, case_row, load_study, main, plot_results, read_results,
+from cosim.cli import main as cli_main
+from cosim.master.results import Cost, Summary
+from cosim.master.scene import Override
+from cosim.apps.study import (StudyError, case_id, case_row, load_study, plot_results, read_results,
                          run_study)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,8 +64,8 @@ def test_small_study_matches_single_runs(tmp_path, fmu_dir, client):
     Equality is exact: same FMUs, same start values, same coupling; the study
     only reuses instances through fmi2Reset, which must leave no trace.
     """
-    from cosim.run import run_scene
-    from cosim.master import Catalog
+    from cosim.master.runner import run_scene
+    from cosim.master.system import Catalog
 
     study = load_study(write(tmp_path / "small.toml", SMALL))
     result = run_study(study, tmp_path / "out", client=client, fmu_dir=fmu_dir, progress=False)
@@ -82,7 +85,7 @@ def test_small_study_matches_single_runs(tmp_path, fmu_dir, client):
             except Exception as exc:  # noqa: BLE001 - a run the master refuses: the row says why
                 assert row["status"] in ("failed", "unstable") and str(exc) in row["error"], case.values
                 continue
-            expected = case_row(alone.summary, alone.result, study.energy_tolerance)
+            expected = case_row(alone.summary, study.energy_tolerance)
             assert row["status"] == expected["status"] == "ok"
             for column in PHYSICS:
                 assert row[column] == expected[column], (case.values, column)
@@ -210,7 +213,7 @@ def test_zip_lengths_must_match(tmp_path):
 def test_value_out_of_the_fmu_range_reports_the_fmu_message(tmp_path, fmu_dir, capsys):
     """CR = 1.5: the scene loader accepts any number; the pounding FMU's own check refuses it."""
     study = bad(tmp_path, '[vary]\n"pounding.CR" = [0.5, 1.5]\n')
-    assert main([str(study), "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out")]) == 2
+    assert cli_main(["study", str(study), "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert "pounding.CR=1.5" in err and "CR = 1.5" in err and "0 < CR <= 1" in err
     assert not (tmp_path / "out").exists()
@@ -235,16 +238,17 @@ def test_case_identity_and_ranges(tmp_path):
     cases = study.cases()
     assert len(cases) == 42 and cases[6].values == {"pounding.gap": 0.03, "ground.record": "kobe1995"}
     assert cases[7].values == {"pounding.gap": 0.03, "ground.record": "elcentro1940"}  # last axis fastest
-    assert "pounding.gap=0.03" in cases[6].overrides and 'ground.record="kobe1995"' in cases[6].overrides
+    assert cases[6].overrides == [Override("pounding", "gap", 0.03), Override("ground", "record", "kobe1995")]
 
 
 def test_energy_created_is_unstable():
     """A negative energy residual beyond the tolerance is energy nobody put in: status unstable."""
-    summary = dict(peak_force_N=1.0, impacts=1, dissipated_energy_J=1.0, contacts={}, buildings={},
-                   energy_input_J=100.0, energy_residual_relative=-0.2, stop_time_s=1.0, communication_steps=10,
-                   rollbacks=0, wall_time_s=0.1)
-    result = SimpleNamespace(has=lambda column: False)
-    row = case_row(summary, result, energy_tolerance=0.05)
+    summary = Summary(scene="s", description="", coupling="adaptive", step_s=0.01, stop_time_s=1.0, instances=[],
+                      peak_force_N=1.0, impacts=1, dissipated_energy_J=1.0, buildings={}, contacts={},
+                      energy_initial_J=0.0, energy_input_J=100.0, energy_kinetic_J=0.0, energy_strain_J=0.0,
+                      energy_damping_J=0.0, energy_contact_J=1.0, energy_residual_J=-20.0,
+                      energy_residual_relative=-0.2, cost=Cost(0.1, 10, 0, 50))
+    row = case_row(summary, energy_tolerance=0.05)
     assert row["status"] == "unstable" and "energy created: 0.2" in row["error"]
-    assert case_row({**summary, "energy_residual_relative": -0.01}, result, 0.05)["status"] == "ok"
-    assert case_row({**summary, "peak_force_N": float("nan")}, result, 0.05)["status"] == "unstable"
+    assert case_row(replace(summary, energy_residual_relative=-0.01), 0.05)["status"] == "ok"
+    assert case_row(replace(summary, peak_force_N=float("nan")), 0.05)["status"] == "unstable"

@@ -1,6 +1,6 @@
 """Markdown tables of the FMUs' variables, read from their modelDescription.xml.
 
-    python -m cosim.fmu_docs [FMU_DIR]     # prints the tables pasted into README.md
+    pounding-cosim fmu-docs [FMU_DIR]     # prints the tables pasted into README.md
 
 The README's variable tables are generated from the built FMUs so that they cannot drift
 from the contract; ``tests/test_readme_variables.py`` checks that they are in sync.
@@ -9,12 +9,13 @@ Array elements ``x[1] .. x[20]`` are shown once as ``x[i]``.
 from __future__ import annotations
 
 import re
-import sys
 from pathlib import Path
 
 from fmpy import read_model_description
 
-_ELEMENT = re.compile(r"^(?P<base>[A-Za-z_]\w*)\[(?P<index>\d+)\]$")
+from ..fmus import FMUS
+from ..master.names import element
+
 _ORDER = ("parameter", "input", "output")
 
 
@@ -30,8 +31,8 @@ def variable_rows(fmu: str | Path) -> list[tuple[str, str, str, str, str, str]]:
         for v in md.modelVariables:
             if v.causality != causality:
                 continue
-            match = _ELEMENT.match(v.name)
-            name = f"{match['base']}[i]" if match else v.name
+            base, index = element(v.name)
+            name = f"{base}[i]" if index is not None else v.name
             if name in seen:
                 continue
             seen.add(name)
@@ -52,37 +53,16 @@ def markdown_table(fmu: str | Path) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Print the variable tables of every FMU; exit code 0, or 2 if an FMU file is missing."""
-    import argparse
+def missing_fmus(folder: Path) -> list[str]:
+    """The FMU files of the package that ``folder`` lacks."""
+    return [f"{spec.name}.fmu" for spec in FMUS if not (Path(folder) / f"{spec.name}.fmu").is_file()]
 
-    root = Path(__file__).resolve().parents[1]
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    from build_fmu import DEFAULT_OUT, FMUS, build_all
 
-    parser = argparse.ArgumentParser(
-        prog="python -m cosim.fmu_docs",
-        description="Print the Markdown variable tables of the FMUs (pasted into README.md; "
-                    "tests/test_readme_variables.py checks they are in sync).")
-    parser.add_argument("fmu_dir", nargs="?", type=Path, default=None, metavar="FMU_DIR",
-                        help="folder holding the built FMUs (default: build them into build/fmus, "
-                             "rebuilt when fmu_src/ changed)")
-    args = parser.parse_args(argv)
-    folder = args.fmu_dir
-    if folder is None:
-        folder = DEFAULT_OUT
-        build_all(folder)
-    missing = [f"{spec.name}.fmu" for spec in FMUS if not (folder / f"{spec.name}.fmu").is_file()]
-    if missing:
-        parser.exit(2, f"error: {folder}: no {', '.join(missing)} (build them with "
-                       f"`python build_fmu.py --out {folder}`, or omit FMU_DIR)\n")
+def tables(folder: Path) -> str:
+    """Every FMU's table with its heading, as pasted into README.md."""
+    out = []
     for spec in FMUS:
-        print(f"#### `{spec.name}.fmu`: {spec.summary}\n")
-        print(markdown_table(folder / f"{spec.name}.fmu"))
-        print()
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+        out.append(f"#### `{spec.name}.fmu`: {spec.summary}\n")
+        out.append(markdown_table(Path(folder) / f"{spec.name}.fmu"))
+        out.append("")
+    return "\n".join(out) + "\n"

@@ -44,7 +44,6 @@ and model transfer.
 """
 from __future__ import annotations
 
-import ctypes
 import functools
 import importlib.util
 import json
@@ -53,54 +52,43 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from fmu_src.contact_laws import LAWS, law_spec
+
+from .opensees_worker import opensees_library_dir
+from .reference import reference_for_scene, scene_inputs
+
+#: the child process's script (numpy and openseespy only)
+WORKER = Path(__file__).resolve().with_name("opensees_worker.py")
+
 MATERIALS = ("JankowskiImpact", "Hertzdamp")
-#: our contact models each OpenSees material reproduces (see module docstring)
-MATERIAL_MODELS = {
-    "JankowskiImpact": ("jankowski", "barros2013"),
-    "Hertzdamp": ("hertzdamp", "ye", "naderpour2013", "hunt_crossley", "gonthier"),
-}
-FALLBACK_ALGORITHMS = ("Newton", "KrylovNewton", "NewtonLineSearch", "ModifiedNewton")
-_LIBRARIES = ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3", "liblapack.so.3")
-_ROOT = Path(__file__).resolve().parents[1]
+#: our contact models each OpenSees material reproduces (see module docstring): the contact law
+#: table's ``opensees`` entries
+MATERIAL_MODELS = {material: tuple(name for name, spec in LAWS.items() if spec.opensees == material)
+                   for material in MATERIALS}
+
+
+def material_for(model: str) -> str:
+    """The OpenSees material that reproduces contact law ``model`` (the table's ``opensees``);
+    ValueError for an unknown name or a law OpenSees has no equivalent of."""
+    material = law_spec(model).opensees
+    if material is None:
+        have = [name for name, spec in LAWS.items() if spec.opensees]
+        raise ValueError(f"model = {model!r} has no OpenSees equivalent; laws that have one: {', '.join(have)}")
+    return material
 
 
 # -- locating and loading openseespy ------------------------------------------------------------
-def opensees_library_dir() -> Path | None:
-    """The wheel's private library folder (``openseespylinux/lib``), or None if not installed."""
-    try:
-        spec = importlib.util.find_spec("openseespylinux")
-    except (ImportError, ValueError):
-        return None
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    lib = Path(list(spec.submodule_search_locations)[0]) / "lib"
-    return lib if lib.is_dir() else None
-
-
-def _preload_libraries() -> None:
-    """Load the wheel's BLAS/LAPACK/Fortran runtime globally so ``opensees.so`` resolves them."""
-    lib = opensees_library_dir()
-    if lib is None:
-        return
-    for name in _LIBRARIES:
-        path = lib / name
-        if path.exists():
-            ctypes.CDLL(str(path), mode=ctypes.RTLD_GLOBAL)
-
-
 def _child_env() -> dict:
     env = dict(os.environ)
     lib = opensees_library_dir()
     if lib is not None:
         env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (str(lib), env.get("LD_LIBRARY_PATH", "")) if p)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(_ROOT), env.get("PYTHONPATH", "")) if p)
     return env
 
 
@@ -110,8 +98,8 @@ def opensees_available() -> bool:
     if importlib.util.find_spec("openseespy") is None:
         return False
     try:
-        proc = subprocess.run([sys.executable, "-P", str(Path(__file__).resolve()), "--check"], env=_child_env(),
-                              cwd=_ROOT, capture_output=True, timeout=120)
+        proc = subprocess.run([sys.executable, "-P", str(WORKER), "--check"], env=_child_env(),
+                              capture_output=True, timeout=120)
     except (OSError, subprocess.TimeoutExpired):
         return False
     return proc.returncode == 0
@@ -210,7 +198,7 @@ def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time
     spec_contacts = []
     for c, contact in enumerate(contacts):
         law = contact.law
-        if law.model not in MATERIAL_MODELS[material]:
+        if law.spec.opensees != material:
             raise ValueError(f"contact {c}: OpenSees {material} reproduces the models "
                              f"{', '.join(MATERIAL_MODELS[material])}, not {law.model!r}")
         spec_contacts.append(dict(left=int(contact.left), left_floor=int(contact.left_floor),
@@ -228,7 +216,7 @@ def run_opensees(buildings: Sequence, ground, contacts: Sequence, stop_time: flo
                  max_iter: int = 25, max_subdivisions: int = 4, timeout: float | None = None) -> PeerResult:
     """Solve the scene with OpenSees (Newmark average acceleration, fixed ``dt`` in s).
 
-    Same plain inputs as :func:`cosim.reference.solve_reference`.  ``tol`` (m) is the
+    Same plain inputs as :func:`cosim.peers.reference.solve_reference`.  ``tol`` (m) is the
     ``NormDispIncr`` tolerance: far below the penetrations (1e-5-1e-3 m) so that the
     iteration error does not mask the time-step error.  Raises ``RuntimeError`` if
     openseespy is not usable; a step that fails every fallback ends the run with
@@ -241,10 +229,10 @@ def run_opensees(buildings: Sequence, ground, contacts: Sequence, stop_time: flo
     with tempfile.TemporaryDirectory(prefix="opensees_peer_") as tmp:
         inp, out = Path(tmp) / "model.json", Path(tmp) / "result.npz"
         inp.write_text(json.dumps(spec), encoding="utf-8")
-        # run this file as a script (-P: without its folder on sys.path): the child needs numpy
-        # and openseespy, not the cosim package and its fmpy imports
-        proc = subprocess.run([sys.executable, "-P", str(Path(__file__).resolve()), "--worker", str(inp), str(out)],
-                              env=_child_env(), cwd=_ROOT, capture_output=True, text=True, timeout=timeout)
+        # the worker as a script (-P: without its folder on sys.path): the child needs numpy and
+        # openseespy, not the cosim package and its fmpy imports
+        proc = subprocess.run([sys.executable, "-P", str(WORKER), "--worker", str(inp), str(out)],
+                              env=_child_env(), capture_output=True, text=True, timeout=timeout)
         if proc.returncode != 0 or not out.exists():
             tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-8:])
             raise RuntimeError(f"OpenSees child process failed (exit {proc.returncode}):\n{tail}")
@@ -277,140 +265,28 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
         subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"])
 
 
-def opensees_for_scene(scene, dt: float, material: str = "JankowskiImpact", overrides: dict | None = None,
+def opensees_for_scene(scene, dt: float, material: str | None = None, overrides: dict | None = None,
                        **options) -> PeerResult:
-    """:func:`run_opensees` on a :class:`cosim.scene.Scene` (inputs as the reference builds them)."""
-    from cosim.reference import scene_inputs
-
+    """:func:`run_opensees` on a :class:`cosim.master.scene.Scene` (inputs as the reference builds them);
+    ``material`` default: the one of the scene's contact law (:func:`material_for`)."""
     inputs = scene_inputs(scene)
     inputs.update(overrides or {})
+    if material is None:
+        materials = {material_for(c.law.model) for c in inputs["contacts"]} or {MATERIALS[0]}
+        if len(materials) > 1:
+            raise ValueError(f"the scene's contacts need several OpenSees materials {sorted(materials)}: give one")
+        material = materials.pop()
     return run_opensees(inputs["buildings"], inputs["ground"], inputs["contacts"], inputs["stop_time"], dt,
                         inputs.get("x0"), inputs.get("v0"), material, **options)
 
 
 # -- the child side ----------------------------------------------------------------------------------
-def _build(ops, spec: dict):
-    """Define the model; returns floor node tags (global dof order) and contact element tags."""
-    ops.wipe()
-    ops.model("basic", "-ndm", 1, "-ndf", 1)
-    ground_node = 1
-    ops.node(ground_node, 0.0)
-    ops.fix(ground_node, 1)
-    tag = 1
-    mat = 0
-    floors = []
-    initial = []
-    for b in spec["buildings"]:
-        below = ground_node
-        for m, k, x0, v0 in zip(b["mass"], b["k"], b["x0"], b["v0"]):
-            tag += 1
-            node = tag
-            ops.node(node, 0.0, "-mass", m)
-            floors.append(node)
-            mat += 1
-            ops.uniaxialMaterial("Elastic", mat, k, b["a1"] * k)      # storey spring + a1 K dashpot
-            ops.element("zeroLength", 1000 + mat, below, node, "-mat", mat, "-dir", 1)
-            if b["a0"] > 0.0:
-                mat += 1
-                ops.uniaxialMaterial("Elastic", mat, 0.0, b["a0"] * m)  # a0 M dashpot to the ground
-                ops.element("zeroLength", 1000 + mat, ground_node, node, "-mat", mat, "-dir", 1)
-            below = node
-            initial.append((node, x0, v0))
-    offsets = np.concatenate(([0], np.cumsum([len(b["mass"]) for b in spec["buildings"]])))
-    contact_tags = []
-    for c in spec["contacts"]:
-        mat += 1
-        if spec["material"] == "JankowskiImpact":
-            ops.uniaxialMaterial("JankowskiImpact", mat, c["k"], c["zeta"], c["m"], -c["gap"], c["n"])
-        else:
-            ops.uniaxialMaterial("Hertzdamp", mat, c["k"], c["zeta"], -c["gap"], c["n"])
-        left = floors[offsets[c["left"]] + c["left_floor"] - 1]
-        right = floors[offsets[c["right"]] + c["right_floor"] - 1]
-        etag = 5000 + len(contact_tags)
-        ops.element("zeroLength", etag, left, right, "-mat", mat, "-dir", 1)
-        contact_tags.append(etag)
-    # Initial conditions only after every element exists: a zeroLength element stores the
-    # relative displacement and velocity of its nodes when it is added to the domain and
-    # subtracts them ever after (ZeroLength::setDomain, d0/v0), which would shift the gap and
-    # hide the approach rate from the contact dashpot.
-    for node, x0, v0 in initial:
-        if x0:
-            ops.setNodeDisp(node, 1, x0, "-commit")
-        if v0:
-            ops.setNodeVel(node, 1, v0, "-commit")
-    if spec["ground"] is not None:
-        ops.timeSeries("Path", 1, "-time", *spec["ground"]["times"], "-values", *spec["ground"]["values"])
-        ops.pattern("UniformExcitation", 1, 1, "-accel", 1)
-    ops.constraints("Plain")
-    ops.numberer("Plain")
-    ops.system("FullGeneral")
-    ops.test("NormDispIncr", spec["tol"], spec["max_iter"])
-    ops.algorithm("Newton")
-    ops.integrator("Newmark", 0.5, 0.25)
-    ops.analysis("Transient")
-    return floors, contact_tags
-
-
-def _advance(ops, dt: float, depth: int, spec: dict, stats: dict) -> bool:
-    """One step of ``dt``: each fallback algorithm in turn, then two half steps."""
-    for name in FALLBACK_ALGORITHMS:
-        ops.algorithm(name)
-        if ops.analyze(1, dt) == 0:
-            stats["algorithms"][name] = stats["algorithms"].get(name, 0) + 1
-            if name != "Newton":
-                ops.algorithm("Newton")
-            return True
-    ops.algorithm("Newton")
-    if depth >= spec["max_subdivisions"]:
-        return False
-    stats["subdivided_steps"] += 1
-    return _advance(ops, 0.5 * dt, depth + 1, spec, stats) and _advance(ops, 0.5 * dt, depth + 1, spec, stats)
-
-
-def _worker(spec: dict) -> tuple[dict, dict]:
-    _preload_libraries()
-    import openseespy.opensees as ops
-
-    t0 = time.perf_counter()
-    floors, contact_tags = _build(ops, spec)
-    build_time = time.perf_counter() - t0
-    offsets = np.concatenate(([0], np.cumsum([len(b["mass"]) for b in spec["buildings"]])))
-    dofs = [(offsets[c["left"]] + c["left_floor"] - 1, offsets[c["right"]] + c["right_floor"] - 1, c["gap"])
-            for c in spec["contacts"]]
-    dt, stop = spec["dt"], spec["stop_time"]
-    n_steps = int(round(stop / dt))
-    if abs(n_steps * dt - stop) > 1e-9 * stop:
-        n_steps = int(math.ceil(stop / dt))
-    t = np.zeros(n_steps + 1)
-    u = np.zeros((n_steps + 1, len(floors)))
-    force = np.zeros((n_steps + 1, len(contact_tags)))
-    u[0] = [ops.nodeDisp(node, 1) for node in floors]
-    stats = {"algorithms": {}, "subdivided_steps": 0}
-    converged, message, k = True, "", 0
-    t_start = time.perf_counter()
-    for k in range(1, n_steps + 1):
-        if not _advance(ops, dt, 0, spec, stats):
-            converged = False
-            message = f"no convergence at t = {ops.getTime():.6g} s after every fallback"
-            k -= 1
-            break
-        t[k] = ops.getTime()
-        u[k] = [ops.nodeDisp(node, 1) for node in floors]
-        for c, etag in enumerate(contact_tags):
-            force[k, c] = max(0.0, -ops.eleResponse(etag, "basicForce")[0])
-    wall = time.perf_counter() - t_start
-    ops.wipe()
-    t, u, force = t[:k + 1], u[:k + 1], force[:k + 1]
-    delta = np.column_stack([u[:, i] - u[:, j] - gap for i, j, gap in dofs]) if dofs else np.zeros((t.size, 0))
-    summary = dict(converged=converged, message=message, wall_time_s=wall, build_time_s=build_time, **stats)
-    return dict(t=t, u=u, force=force, delta=delta), summary
 
 
 def compare(scene, dts: Sequence[float] = (1e-3, 5e-4, 2e-4, 1e-4), material: str = "JankowskiImpact",
             overrides: dict | None = None) -> str:
-    """Table of OpenSees at several ``dt`` against the reference solver on one scene (benchmark)."""
-    from cosim.reference import reference_for_scene
-
+    """Table of OpenSees at several ``dt`` against the reference solver on one scene (benchmark;
+    ``pounding-cosim opensees SCENE --dt ...``)."""
     ref = reference_for_scene(scene, {"output_dt": 0.01, **(overrides or {})})
     lines = [f"scene {scene.name}: reference ({ref.method}, rtol {ref.rtol:g}) impacts {ref.impacts}, "
              f"peak force {ref.peak_force_N:.5e} N, dissipated {ref.dissipated_energy_J:.6g} J, "
@@ -429,43 +305,3 @@ def compare(scene, dts: Sequence[float] = (1e-3, 5e-4, 2e-4, 1e-4), material: st
                      f"{peer.dissipated_energy_J / ref.dissipated_energy_J - 1:+9.2%} {du:9.3%} "
                      f"{peer.wall_time_s:8.2f}  {note}")
     return "\n".join(lines)
-
-
-def _main(argv: Sequence[str]) -> int:
-    if argv and argv[0] == "--worker":
-        return _worker_main(argv[1:])
-    if argv and argv[0] == "--check":
-        _preload_libraries()
-        import openseespy.opensees  # noqa: F401
-        return 0
-    import argparse
-
-    from cosim.scene import load_scene
-
-    parser = argparse.ArgumentParser(prog="python -m cosim.opensees_peer",
-                                     description="OpenSees vs the reference solver on a scene (benchmark)")
-    parser.add_argument("scene", help="scene file or bundled scene name")
-    parser.add_argument("--dt", type=float, nargs="+", default=[1e-3, 5e-4, 2e-4, 1e-4], help="time steps (s)")
-    parser.add_argument("--material", choices=MATERIALS, default="JankowskiImpact")
-    parser.add_argument("--set", action="append", default=[], metavar="INSTANCE.VAR=VALUE",
-                        help="scene override, as for cosim/run.py")
-    args = parser.parse_args(argv)
-    if not opensees_available():
-        print("openseespy is not importable (pip install openseespy)", file=sys.stderr)
-        return 1
-    print(compare(load_scene(args.scene, args.set), args.dt, args.material))
-    return 0
-
-
-def _worker_main(argv: Sequence[str]) -> int:
-    if len(argv) != 2:
-        print("usage: python cosim/opensees_peer.py --worker MODEL.json RESULT.npz", file=sys.stderr)
-        return 2
-    spec = json.loads(Path(argv[0]).read_text(encoding="utf-8"))
-    arrays, summary = _worker(spec)
-    np.savez(argv[1], summary=np.array(json.dumps(summary)), **arrays)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_main(sys.argv[1:]))

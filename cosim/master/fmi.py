@@ -35,13 +35,15 @@ from collections import deque
 from ctypes import POINTER, byref, c_char_p, c_double, c_int, c_uint
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, NoReturn, Sequence
+from typing import Any, Iterable, Mapping, NoReturn, Protocol, Sequence
 
 import numpy as np
-from fmpy import extract, read_model_description
+from fmpy import extract
 from fmpy.fmi1 import calloc, free
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+from .interface import VariableInfo, read_interface
 
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR = 0, 1, 2, 3
@@ -156,73 +158,82 @@ class LogMessage:
     text: str
 
 
-@dataclass(frozen=True)
-class VariableInfo:
-    """What the master needs to know about one FMU variable."""
+class PortProtocol(Protocol):
+    """A fixed list of variables of one type, read or written as one vector (``values``)."""
+
+    names: list[str]
+    values: np.ndarray
+
+    def get(self) -> np.ndarray: ...
+
+    def set(self, values: Any = None) -> None: ...
+
+
+class InstanceProtocol(Protocol):
+    """What the master asks of an FMU instance (:class:`Instance` is the real one; a fake with
+    the same methods runs a system without FMUs).  Times in s; ``calls`` counts FMI calls,
+    ``do_steps`` the doSteps."""
 
     name: str
-    type: str                 # Real, Integer, Boolean, String
-    causality: str            # parameter, input, output, ...
-    variability: str
-    value_reference: int
-    start: Any
-    unit: str | None
-    description: str | None
+    calls: int
+    do_steps: int
+
+    def setup(self, start_time: float = 0.0, stop_time: float | None = None) -> None: ...
+
+    def set(self, values: Mapping[str, Any]) -> None: ...
+
+    def exit_initialization(self) -> None: ...
+
+    def do_step(self, t: float, h: float) -> None: ...
+
+    def reset(self) -> None: ...
+
+    def terminate(self) -> None: ...
+
+    def free(self) -> None: ...
+
+    def get_state(self) -> Any: ...
+
+    def set_state(self, state: Any) -> None: ...
+
+    def free_state(self, state: Any) -> None: ...
+
+    def variable(self, name: str, causality: str | None = None) -> VariableInfo: ...
+
+    def real_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> PortProtocol: ...
+
+    def integer_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> PortProtocol: ...
+
+    def boolean_port(self, names: Sequence[str], buffer: np.ndarray | None = None) -> PortProtocol: ...
 
 
 class FMU:
-    """One FMU file: model description read and archive extracted once.
+    """One FMU file: interface read and archive extracted once.
 
     Create as many instances as needed with :meth:`instantiate`.  The
     extracted folder is shared by every ``FMU`` object of the same file in the
     process and removed at interpreter exit (see ``_EXTRACTED``); :meth:`close`
-    only detaches this object.
+    only detaches this object.  ``interface`` (:class:`~cosim.master.interface.FmuInterface`)
+    holds the variables, read from the modelDescription.
     """
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        if not self.path.exists():
-            raise FileNotFoundError(f"FMU {self.path} does not exist (build it with: python build_fmu.py)")
-        self.model_description = read_model_description(str(self.path))
-        if self.model_description.coSimulation is None:
-            raise ValueError(f"{self.path} is not a co-simulation FMU")
+        self.interface = read_interface(self.path)
+        self.model_description = self.interface.model_description
         self.name = self.path.stem
-        self.variables: dict[str, VariableInfo] = {}
-        for v in self.model_description.modelVariables:
-            start = v.start
-            if start is not None:
-                start = {"Real": float, "Integer": int, "Enumeration": int,
-                         "Boolean": lambda s: str(s).lower() in ("true", "1"),
-                         "String": str}[v.type](start)
-            self.variables[v.name] = VariableInfo(v.name, v.type, v.causality, v.variability,
-                                                  v.valueReference, start, v.unit, v.description)
+        self.variables: dict[str, VariableInfo] = self.interface.variables
         self.unzip_dir: Path | None = _extract_once(self.path)
 
     def variable(self, name: str, causality: str | None = None) -> VariableInfo:
         """Look a variable up by name (and causality), with a helpful error."""
-        try:
-            info = self.variables[name]
-        except KeyError:
-            raise KeyError(self.unknown_variable_message(name, causality)) from None
-        if causality is not None and info.causality != causality:
-            raise KeyError(f"{self.name}.fmu variable {name!r} is an {info.causality}, not a {causality}")
-        return info
+        return self.interface.variable(name, causality)
 
     def names(self, causality: str | None = None, type: str | None = None) -> list[str]:
-        return [n for n, v in self.variables.items()
-                if (causality is None or v.causality == causality) and (type is None or v.type == type)]
+        return self.interface.names(causality, type)
 
     def unknown_variable_message(self, name: str, causality: str | None = None) -> str:
-        import difflib
-
-        pool = self.names(causality)
-        base = name.split("[", 1)[0]
-        close = difflib.get_close_matches(name, pool, n=3) or \
-            sorted({p.split("[", 1)[0] for p in pool if p.split("[", 1)[0] == base})[:1] or \
-            difflib.get_close_matches(base, sorted({p.split("[", 1)[0] for p in pool}), n=3)
-        kind = f" {causality}" if causality else " variable"
-        hint = f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
-        return f"{self.name}.fmu has no{kind} {name!r}{hint}"
+        return self.interface.unknown_variable_message(name, causality)
 
     def instantiate(self, instance_name: str) -> "Instance":
         if self.unzip_dir is None:

@@ -4,7 +4,7 @@ libcosim [OSP, https://open-simulation-platform.github.io/libcosim] is a C++
 co-simulation library; libcosimpy wraps its C API (libcosimc) with ctypes and loads
 FMUs through FMI Library.  This module drives it for two cases:
 
-* :func:`run_system`: a :class:`cosim.ssp.System` (components, start values,
+* :func:`run_system`: a :class:`cosim.peers.ssp.System` (components, start values,
   connections) built from a scene, added slave by slave through the C API;
 * :func:`run_ssp`: an ``.ssp`` package, loaded by libcosim's own SSP parser.
 
@@ -41,7 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
-from cosim.ssp import System, build_ssd, check_system
+from .ssp import OSP_NS, SSC_NS, SSD_NAME, SSD_NS, System, build_ssd, check_system
 
 NS_PER_S = 1_000_000_000
 
@@ -268,7 +268,6 @@ def run_ssp(path: Path | str, observe: Sequence[str], *, stop_time: float | None
     from lxml import etree
     import zipfile
 
-    from cosim.ssp import OSP_NS, SSC_NS, SSD_NAME, SSD_NS
     from libcosimpy.CosimExecution import CosimExecution
 
     path = Path(path)
@@ -331,15 +330,15 @@ def _in_child(kind: str, target, observe: list[str], **kwargs) -> LibcosimResult
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]   # the folder holding the cosim package
     with tempfile.TemporaryDirectory(prefix="libcosim_run_") as tmp:
         request, answer = Path(tmp) / "request.pkl", Path(tmp) / "result.pkl"
         request.write_bytes(pickle.dumps((kind, target, observe, kwargs)))
         env = dict(os.environ)
         env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
         env["PYTHONPATH"] = os.pathsep.join([str(root)] + [p for p in [env.get("PYTHONPATH")] if p])
-        proc = subprocess.run([sys.executable, "-m", "cosim.libcosim_runner", str(request), str(answer)],
-                              env=env, cwd=str(root), capture_output=True, text=True)
+        proc = subprocess.run([sys.executable, "-m", "cosim.peers.libcosim", str(request), str(answer)],
+                              env=env, cwd=tmp, capture_output=True, text=True)
         if not answer.exists():
             tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
             raise LibcosimError(f"libcosim child process failed (exit code {proc.returncode}):\n{tail}")
@@ -370,10 +369,14 @@ def _child_main(request: str, answer: str) -> None:
     os._exit(0)
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":   # the child process of _in_child (a protocol, not a command line)
     import sys
 
-    # import by package name so that the pickled result refers to cosim.libcosim_runner
-    from cosim.libcosim_runner import _child_main as _main
+    if len(sys.argv) != 3 or sys.argv[1].startswith("-"):
+        print("usage: python -m cosim.peers.libcosim REQUEST.pkl ANSWER.pkl  (the child process of "
+              "cosim.peers.libcosim.run_system / run_ssp; not a command)", file=sys.stderr)
+        sys.exit(2)
+    # import by package name so that the pickled result refers to cosim.peers.libcosim
+    from cosim.peers.libcosim import _child_main as _main
 
     _main(sys.argv[1], sys.argv[2])

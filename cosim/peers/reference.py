@@ -68,9 +68,14 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
+from fmu_src.contact_laws import law_for
+from fmu_src.ground_records import record_from_parameters
+from fmu_src.shear_building import ShearBuilding
+
+from ..master.interface import parameter_defaults
+from ..master.names import element_name
+
 OPEN, APPROACH, RESTITUTION = "open", "approach", "restitution"
-#: laws whose raw force can turn negative in restitution (clipped at 0: the bodies separate early)
-CLIPPED_MODELS = ("kelvin_voigt", "hertzdamp", "ye", "naderpour2013", "hunt_crossley", "gonthier")
 METHODS = ("DOP853", "Radau", "RK45", "BDF", "LSODA")
 
 
@@ -344,7 +349,7 @@ class _System:
             else:
                 out.append((_event(delta, -1), c, "separation"))
                 out.append((_event(rate, +1), c, "reapproach"))
-                if contact.law.model in CLIPPED_MODELS and contact.law.zeta > 0.0:
+                if contact.law.spec.clipped and contact.law.zeta > 0.0:   # the contact law table's rule
                     # the force reaches 0 (and is clipped) before delta does: separation
                     def raw(t, y, law=contact.law, i=i, j=j, gap=gap, v=float(v_imp[c])):
                         return law.raw_force(y[i] - y[j] - gap, y[n + i] - y[n + j], v, approaching=False)
@@ -420,14 +425,24 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
     _check_contacts(buildings, contacts)
     ag, breakpoints = _ground(ground, stop_time)
     system = _System(buildings, contacts, ag)
-    n = system.n
+    y0 = _initial_state(system, x0, v0)
+    t_output = _output_grid(stop_time, output_dt, t_output)
+    breaks = np.unique(np.append(breakpoints[(breakpoints > 0) & (breakpoints < stop_time)]
+                                 if break_at_samples else np.empty(0), stop_time))
+    run = _Integration(system, method, rtol, _tolerances(system, rtol, atol), max_step, t_output, y0)
+    run.march(breaks, stop_time)
+    return run.result(t_start)
 
+
+def _initial_state(system: "_System", x0, v0) -> np.ndarray:
+    """The state at t = 0 from the floors' initial displacements and velocities (m, m/s)."""
+    n = system.n
     y0 = np.zeros(system.size)
     for name, values, start in (("x0", x0, 0), ("v0", v0, n)):
         if values is None:
             continue
-        if len(values) != len(buildings):
-            raise ValueError(f"{name}: {len(values)} arrays for {len(buildings)} buildings")
+        if len(values) != len(system.buildings):
+            raise ValueError(f"{name}: {len(values)} arrays for {len(system.buildings)} buildings")
         for b, arr in enumerate(values):
             arr = np.zeros(0) if arr is None else np.asarray(arr, dtype=float).reshape(-1)
             size = system.offsets[b + 1] - system.offsets[b]
@@ -441,16 +456,23 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
         if d > 0.0:
             raise ValueError(f"contact {c} is closed at t = 0 (penetration {d:.3e} m): start the scene "
                              f"with the floors apart (x_left - x_right < gap)")
+    return y0
 
-    if atol is None:
-        # The energy accumulators start at 0 J and only feed the balance check.  At rtol J
-        # (1e-9 J) Radau's Newton iteration on the contact work cannot converge at an onset
-        # whose dashpot grows like delta^((n-1)/2) (Jankowski: the step collapses to nothing);
-        # 1e3 rtol J is still 1e-6 of a 1 kJ impact.
-        atol_vec = np.concatenate((np.full(n, 1e-2 * rtol), np.full(n, 1e-1 * rtol),
-                                   np.full(2 + len(contacts), 1e3 * rtol)))
-    else:
-        atol_vec = float(atol)
+
+def _tolerances(system: "_System", rtol: float, atol: float | None):
+    """``atol`` of each state component (m, m/s, J), or the one given."""
+    if atol is not None:
+        return float(atol)
+    n = system.n
+    # The energy accumulators start at 0 J and only feed the balance check.  At rtol J
+    # (1e-9 J) Radau's Newton iteration on the contact work cannot converge at an onset
+    # whose dashpot grows like delta^((n-1)/2) (Jankowski: the step collapses to nothing);
+    # 1e3 rtol J is still 1e-6 of a 1 kJ impact.
+    return np.concatenate((np.full(n, 1e-2 * rtol), np.full(n, 1e-1 * rtol),
+                           np.full(2 + len(system.contacts), 1e3 * rtol)))
+
+
+def _output_grid(stop_time: float, output_dt: float, t_output) -> np.ndarray:
     if t_output is None:
         count = int(math.floor(stop_time / output_dt + 1e-9))
         t_output = np.append(np.arange(count + 1) * output_dt, stop_time)
@@ -458,131 +480,158 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
     t_output = np.asarray(t_output, dtype=float)
     if t_output.size and (t_output[0] < 0.0 or t_output[-1] > stop_time or np.any(np.diff(t_output) < 0)):
         raise ValueError("t_output must be sorted and within [0, stop_time]")
+    return t_output
 
-    breaks = np.unique(np.append(breakpoints[(breakpoints > 0) & (breakpoints < stop_time)]
-                                 if break_at_samples else np.empty(0), stop_time))
 
-    phases = [OPEN] * len(contacts)
-    v_imp = np.zeros(len(contacts))
-    event_counts: dict[str, int] = {}
-    overlap = [False] * len(contacts)   # open after a force separation, floors still overlapping
-    open_impacts: dict[int, dict] = {}
-    impacts: list[Impact] = []
+class _Integration:
+    """One reference run: the segments between events and breakpoints, and their bookkeeping.
 
-    y_out = np.empty((t_output.size, system.size))
-    step_t: list[np.ndarray] = [np.array([0.0])]
-    nfev = njev = nlu = segments = 0
-    t, y = 0.0, y0
-    first_step = None
-    out_index = 0
-    if t_output.size and t_output[0] == 0.0:
-        y_out[0] = y0
-        out_index = 1
-    peaks = _PeakTracker(np.abs(y0[:n]))
-    break_index = 0
+    Holds the contacts' phases, latched impact speeds and open impacts, the output grid being
+    filled, the integrator's steps and the cost counters (module docstring: events).
+    """
 
-    while t < stop_time:
-        while breaks[break_index] <= t:
-            break_index += 1
-        t_end = breaks[break_index]
-        if t_end - t <= 8.0 * np.finfo(float).eps * max(1.0, abs(t)):
-            t = t_end          # an event a few ulp before a sample time: nothing to integrate
-            continue
-        if first_step is not None:
-            first_step = min(first_step, t_end - t)
-        event_list = system.events(phases, v_imp, overlap)
+    def __init__(self, system: "_System", method: str, rtol: float, atol, max_step: float,
+                 t_output: np.ndarray, y0: np.ndarray):
+        self.system = system
+        self.method, self.rtol, self.atol, self.max_step = method, rtol, atol, max_step
+        nc = len(system.contacts)
+        self.phases = [OPEN] * nc
+        self.v_imp = np.zeros(nc)
+        self.event_counts: dict[str, int] = {}
+        self.overlap = [False] * nc   # open after a force separation, floors still overlapping
+        self.open_impacts: dict[int, dict] = {}
+        self.impacts: list[Impact] = []
+        self.t_output, self.y0 = t_output, y0
+        self.y_out = np.empty((t_output.size, system.size))
+        self.step_t: list[np.ndarray] = [np.array([0.0])]
+        self.nfev = self.njev = self.nlu = self.segments = 0
+        self.first_step = None
+        self.out_index = 0
+        if t_output.size and t_output[0] == 0.0:
+            self.y_out[0] = y0
+            self.out_index = 1
+        self.peaks = _PeakTracker(np.abs(y0[:system.n]))
+
+    def march(self, breaks: np.ndarray, stop_time: float) -> None:
+        """Integrate from 0 to ``stop_time``: one segment to the next event or breakpoint at a time."""
+        t, y = 0.0, self.y0
+        break_index = 0
+        while t < stop_time:
+            while breaks[break_index] <= t:
+                break_index += 1
+            t_end = breaks[break_index]
+            if t_end - t <= 8.0 * np.finfo(float).eps * max(1.0, abs(t)):
+                t = t_end          # an event a few ulp before a sample time: nothing to integrate
+                continue
+            t, y = self._segment(t, t_end, y)
+        self.y_end = y
+
+    def _segment(self, t: float, t_end: float, y: np.ndarray) -> tuple[float, np.ndarray]:
+        """One ``solve_ivp`` run with the current phases, up to ``t_end`` or the first event."""
+        system, phases, v_imp = self.system, self.phases, self.v_imp
+        if self.first_step is not None:
+            self.first_step = min(self.first_step, t_end - t)
+        event_list = system.events(phases, v_imp, self.overlap)
         kwargs = {}
-        if method in ("Radau", "BDF", "LSODA"):
+        if self.method in ("Radau", "BDF", "LSODA"):
             kwargs["jac"] = system.jacobian(phases, v_imp)
-        sol = solve_ivp(system.rhs(phases, v_imp), (t, t_end), y, method=method, rtol=rtol, atol=atol_vec,
-                        events=[e[0] for e in event_list], dense_output=True, first_step=first_step,
-                        max_step=max_step, **kwargs)
+        sol = solve_ivp(system.rhs(phases, v_imp), (t, t_end), y, method=self.method, rtol=self.rtol,
+                        atol=self.atol, events=[e[0] for e in event_list], dense_output=True,
+                        first_step=self.first_step, max_step=self.max_step, **kwargs)
         if sol.status < 0:
             raise RuntimeError(f"reference solver failed at t = {t:.6g} s: {sol.message}")
-        segments += 1
-        nfev += sol.nfev
-        njev += sol.njev
-        nlu += sol.nlu
+        self.segments += 1
+        self.nfev += sol.nfev
+        self.njev += sol.njev
+        self.nlu += sol.nlu
         t_new = float(sol.t[-1])
         y_new = sol.y[:, -1]
         if sol.t.size >= 2:
-            first_step = min(float(sol.t[-1] - sol.t[-2]), max_step) or None
+            self.first_step = min(float(sol.t[-1] - sol.t[-2]), self.max_step) or None
             if sol.status == 1 and sol.t.size >= 3:   # the event step is truncated: use the one before
-                first_step = float(sol.t[-2] - sol.t[-3])
-        step_t.append(sol.t[1:])
-        peaks.update(sol)
+                self.first_step = float(sol.t[-2] - sol.t[-3])
+        self.step_t.append(sol.t[1:])
+        self.peaks.update(sol)
 
         # output grid points inside (t, t_new]
-        stop = np.searchsorted(t_output, t_new, side="right")
-        if stop > out_index:
-            y_out[out_index:stop] = sol.sol(t_output[out_index:stop]).T
-            out_index = stop
+        stop = np.searchsorted(self.t_output, t_new, side="right")
+        if stop > self.out_index:
+            self.y_out[self.out_index:stop] = sol.sol(self.t_output[self.out_index:stop]).T
+            self.out_index = stop
 
         # contact bookkeeping on this segment
-        closed = [c for c in range(len(contacts)) if phases[c] != OPEN]
+        closed = [c for c in range(len(system.contacts)) if phases[c] != OPEN]
         for c in closed:
             F_peak, d_peak = _segment_peaks(system, sol, c, phases, v_imp)
-            rec = open_impacts[c]
+            rec = self.open_impacts[c]
             rec["peak_force_N"] = max(rec["peak_force_N"], F_peak)
             rec["max_penetration"] = max(rec["max_penetration"], d_peak)
 
-        t, y = t_new, y_new
         if sol.status == 1:
             fired = [(len(te) and te[0], k) for k, te in enumerate(sol.t_events) if len(te)]
             _, k = min(fired)
             _, c, kind = event_list[k]
-            event_counts[kind] = event_counts.get(kind, 0) + 1
-            delta, rate = system.kinematics(y)
-            if kind == "onset":
-                overlap[c] = False
-                phases[c] = APPROACH
-                v_imp[c] = rate[c]
-                open_impacts[c] = dict(contact=c, t_onset=t, v_impact=float(rate[c]), peak_force_N=0.0,
-                                       max_penetration=0.0, work0=float(y[2 * n + 2 + c]))
-                if rate[c] <= 0.0:   # grazing contact: no approach phase
-                    phases[c] = RESTITUTION
-            elif kind == "max_penetration":
+            self._event(kind, c, t_new, y_new)
+        return t_new, y_new
+
+    def _event(self, kind: str, c: int, t: float, y: np.ndarray) -> None:
+        """The phase change of contact ``c`` at an event of ``kind`` (module docstring)."""
+        system, phases, n = self.system, self.phases, self.system.n
+        self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
+        delta, rate = system.kinematics(y)
+        if kind == "onset":
+            self.overlap[c] = False
+            phases[c] = APPROACH
+            self.v_imp[c] = rate[c]
+            self.open_impacts[c] = dict(contact=c, t_onset=t, v_impact=float(rate[c]), peak_force_N=0.0,
+                                        max_penetration=0.0, work0=float(y[2 * n + 2 + c]))
+            if rate[c] <= 0.0:   # grazing contact: no approach phase
                 phases[c] = RESTITUTION
-            elif kind == "reapproach":
-                phases[c] = APPROACH
-            elif kind == "parted":
-                overlap[c] = False
-            elif kind in ("separation", "force_separation"):
-                phases[c] = OPEN
-                overlap[c] = kind == "force_separation" and delta[c] > 0.0
-                rec = open_impacts.pop(c)
-                impacts.append(_close_impact(rec, t, float(y[2 * n + 2 + c]) - rec.pop("work0")))
+        elif kind == "max_penetration":
+            phases[c] = RESTITUTION
+        elif kind == "reapproach":
+            phases[c] = APPROACH
+        elif kind == "parted":
+            self.overlap[c] = False
+        elif kind in ("separation", "force_separation"):
+            phases[c] = OPEN
+            self.overlap[c] = kind == "force_separation" and delta[c] > 0.0
+            rec = self.open_impacts.pop(c)
+            self.impacts.append(_close_impact(rec, t, float(y[2 * n + 2 + c]) - rec.pop("work0")))
 
-    # impacts still closed at the end: dissipated = work - stored elastic energy
-    delta_end, _ = system.kinematics(y)
-    stored_end = system.stored_energy(np.where(np.array([p != OPEN for p in phases]), delta_end, 0.0))
-    for c, rec in sorted(open_impacts.items()):
-        work = float(y[2 * n + 2 + c]) - rec.pop("work0")
-        impacts.append(_close_impact(rec, math.nan, work - stored_end[c]))
-    impacts.sort(key=lambda imp: imp.t_onset)
+    def result(self, t_start: float) -> "ReferenceResult":
+        """The histories on the output grid, the impacts and the energy balance."""
+        system, n, y_out, y0, t_output = self.system, self.system.n, self.y_out, self.y0, self.t_output
+        impacts = list(self.impacts)
+        # impacts still closed at the end: dissipated = work - stored elastic energy
+        delta_end, _ = system.kinematics(self.y_end)
+        stored_end = system.stored_energy(np.where(np.array([p != OPEN for p in self.phases]), delta_end, 0.0))
+        for c, rec in sorted(self.open_impacts.items()):
+            work = float(self.y_end[2 * n + 2 + c]) - rec.pop("work0")
+            impacts.append(_close_impact(rec, math.nan, work - stored_end[c]))
+        impacts.sort(key=lambda imp: imp.t_onset)
 
-    # histories on the output grid (phases re-derived from the impact list)
-    u_out, v_out = y_out[:, :n], y_out[:, n:2 * n]
-    forces, deltas, stored = _force_history(system, t_output, y_out, impacts)
-    contact_work = y_out[:, 2 * n + 2:].sum(axis=1)
-    kinetic = 0.5 * np.einsum("ij,j,ij->i", v_out, system.masses, v_out)
-    strain = 0.5 * np.einsum("ij,jk,ik->i", u_out, system.K, u_out)
-    e0 = 0.5 * float(y0[n:2 * n] @ (system.masses * y0[n:2 * n])) + 0.5 * float(y0[:n] @ system.K @ y0[:n])
-    energies = Energies(input=y_out[:, 2 * n], kinetic=kinetic, strain=strain, damping=y_out[:, 2 * n + 1],
-                        contact_work=contact_work, contact_stored=stored.sum(axis=1),
-                        residual=y_out[:, 2 * n] + e0 - (kinetic + strain + y_out[:, 2 * n + 1] + contact_work))
-    peak_u = peaks.refined()
-
-    return ReferenceResult(
-        t=t_output, u=u_out, v=v_out, contact_force=forces, penetration=deltas, energies=energies,
-        impact_list=tuple(impacts),
-        peak_force_N=max((imp.peak_force_N for imp in impacts), default=0.0),
-        dissipated_energy_J=float(sum(imp.dissipated_energy_J for imp in impacts)),
-        peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(system.offsets[:-1], system.offsets[1:])),
-        t_steps=np.concatenate(step_t), floor_offsets=system.offsets, method=method, rtol=rtol,
-        nfev=nfev, njev=njev, nlu=nlu, n_segments=segments, wall_time_s=time.perf_counter() - t_start,
-        event_counts=event_counts,
-    )
+        # histories on the output grid (phases re-derived from the impact list)
+        u_out, v_out = y_out[:, :n], y_out[:, n:2 * n]
+        forces, deltas, stored = _force_history(system, t_output, y_out, impacts)
+        contact_work = y_out[:, 2 * n + 2:].sum(axis=1)
+        kinetic = 0.5 * np.einsum("ij,j,ij->i", v_out, system.masses, v_out)
+        strain = 0.5 * np.einsum("ij,jk,ik->i", u_out, system.K, u_out)
+        e0 = 0.5 * float(y0[n:2 * n] @ (system.masses * y0[n:2 * n])) + 0.5 * float(y0[:n] @ system.K @ y0[:n])
+        energies = Energies(input=y_out[:, 2 * n], kinetic=kinetic, strain=strain, damping=y_out[:, 2 * n + 1],
+                            contact_work=contact_work, contact_stored=stored.sum(axis=1),
+                            residual=y_out[:, 2 * n] + e0 - (kinetic + strain + y_out[:, 2 * n + 1] + contact_work))
+        peak_u = self.peaks.refined()
+        return ReferenceResult(
+            t=t_output, u=u_out, v=v_out, contact_force=forces, penetration=deltas, energies=energies,
+            impact_list=tuple(impacts),
+            peak_force_N=max((imp.peak_force_N for imp in impacts), default=0.0),
+            dissipated_energy_J=float(sum(imp.dissipated_energy_J for imp in impacts)),
+            peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(system.offsets[:-1], system.offsets[1:])),
+            t_steps=np.concatenate(self.step_t), floor_offsets=system.offsets, method=self.method, rtol=self.rtol,
+            nfev=self.nfev, njev=self.njev, nlu=self.nlu, n_segments=self.segments,
+            wall_time_s=time.perf_counter() - t_start, event_counts=self.event_counts,
+        )
 
 
 def _check_contacts(buildings, contacts):
@@ -708,7 +757,7 @@ def _force_history(system: _System, t_out, y_out, impacts):
 
 # -- scenes ----------------------------------------------------------------------------------------
 def reference_for_scene(scene, overrides: dict | None = None) -> ReferenceResult:
-    """Reference solution of a :class:`cosim.scene.Scene`.
+    """Reference solution of a :class:`cosim.master.scene.Scene`.
 
     ``overrides`` are keyword arguments of :func:`solve_reference` that replace those derived
     from the scene (e.g. ``{"rtol": 1e-8, "stop_time": 5.0, "output_dt": 0.01}``).
@@ -718,54 +767,40 @@ def reference_for_scene(scene, overrides: dict | None = None) -> ReferenceResult
     return solve_reference(**inputs)
 
 
-def _start_values(slave_class) -> dict:
-    """FMU start values of a slave class (the defaults a scene does not repeat)."""
-    return {var.name: var.start for var in slave_class.VARIABLES if var.causality == "parameter"}
-
-
 def scene_inputs(scene) -> dict:
     """Plain arguments of :func:`solve_reference` for a scene, with the FMUs' physics.
 
     Builds the same objects the slaves build in ``initialize()`` from the same parameter
-    values (scene values over FMU start values): ``ShearBuilding`` (``from_period`` when
-    ``T1 > 0``), ``record_from_parameters`` and ``law_for``.  Contacts keep the scene's order.
+    values (the scene's, else the FMU's defaults: :meth:`cosim.master.scene.InstanceSpec.value`):
+    ``ShearBuilding`` (``from_period`` when ``T1 > 0``), ``record_from_parameters`` and ``law_for``.
+    Contacts keep the scene's order.
     """
-    from fmu_src.building_slave import Building
-    from fmu_src.contact_laws import law_for
-    from fmu_src.ground_records import record_from_parameters
-    from fmu_src.shear_building import ShearBuilding
-
     buildings, x0, v0 = [], [], []
-    defaults = _start_values(Building)
     for spec in scene.buildings:
-        p = {**defaults, **spec.parameters}
-        n = int(p["n_storeys"])
-        masses = [float(p[f"m[{i}]"]) for i in range(1, n + 1)]
-        stiffnesses = [float(p[f"k[{i}]"]) for i in range(1, n + 1)]
-        if float(p["T1"]) > 0.0:
-            building = ShearBuilding.from_period(float(p["T1"]), masses, stiffnesses, float(p["zeta"]), p["damping"])
+        n = int(spec.value("n_storeys"))
+        floors = range(1, n + 1)
+        masses = [float(spec.value(element_name("m", i))) for i in floors]
+        stiffnesses = [float(spec.value(element_name("k", i))) for i in floors]
+        T1, zeta, damping = float(spec.value("T1")), float(spec.value("zeta")), spec.value("damping")
+        if T1 > 0.0:
+            building = ShearBuilding.from_period(T1, masses, stiffnesses, zeta, damping)
         else:
-            building = ShearBuilding(masses, stiffnesses, float(p["zeta"]), p["damping"])
+            building = ShearBuilding(masses, stiffnesses, zeta, damping)
         buildings.append(building)
-        x0.append(np.array([float(p[f"x0[{i}]"]) for i in range(1, n + 1)]))
-        v0.append(np.array([float(p[f"v0[{i}]"]) for i in range(1, n + 1)]))
+        x0.append(np.array([float(spec.value(element_name("x0", i))) for i in floors]))
+        v0.append(np.array([float(spec.value(element_name("v0", i))) for i in floors]))
 
     ground = None
     if scene.ground is not None:
-        from fmu_src.ground_motion_slave import GroundMotion
-        p = {**_start_values(GroundMotion), **scene.ground.parameters}
-        ground = record_from_parameters(p)
+        ground = record_from_parameters({**parameter_defaults(scene.ground.fmu), **scene.ground.parameters})
 
     contacts = []
-    if scene.contacts:
-        from fmu_src.pounding_slave import Pounding
-        defaults = _start_values(Pounding)
-        index = {spec.name: b for b, spec in enumerate(scene.buildings)}
-        for level, spec in zip(scene.levels, scene.contacts):
-            p = {**defaults, **spec.parameters}
-            law = law_for(p["model"], float(p["k"]), float(p["n"]), float(p["m1"]), float(p["m2"]),
-                          float(p["CR"]), float(p["zeta"]))
-            contacts.append(Contact(index[level.left], int(level.floor_left), index[level.right],
-                                    int(level.floor_right), law, float(p["gap"])))
+    index = {spec.name: b for b, spec in enumerate(scene.buildings)}
+    for level, spec in zip(scene.levels, scene.contacts):
+        p = spec.value
+        law = law_for(p("model"), float(p("k")), float(p("n")), float(p("m1")), float(p("m2")),
+                      float(p("CR")), float(p("zeta")))
+        contacts.append(Contact(index[level.left], int(level.floor_left), index[level.right],
+                                int(level.floor_right), law, float(p("gap"))))
     return dict(buildings=buildings, ground=ground, contacts=contacts, stop_time=float(scene.stop_time),
                 x0=x0, v0=v0)

@@ -1,4 +1,4 @@
-"""Coupling strategies: how the master advances a :class:`~cosim.master.System`.
+"""The base of every coupling strategy: how the master advances a :class:`~cosim.master.system.System`.
 
 Modelled on scipy's ``OdeSolver``: a strategy is constructed with the
 system, ``t0``, ``t_bound`` and the communication step, and each call of
@@ -6,9 +6,12 @@ system, ``t0``, ``t_bound`` and the communication step, and each call of
 (``t`` advances, ``status`` becomes ``"finished"`` at ``t_bound``).  Cost
 counters live on the strategy (``communication_steps``, ``rollbacks``) and
 on the instances (FMI calls).  A new strategy subclasses
-:class:`CouplingStrategy`, implements :meth:`_advance` and registers itself in
-:data:`STRATEGIES`; an adaptive one may shorten ``h``, save and restore FMU
-states (``Instance.get_state``/``set_state``) and count ``rollbacks``.
+:class:`CouplingStrategy` in a module of its own, implements :meth:`_advance` and is
+added to the registry :data:`cosim.master.coupling.STRATEGIES` (one line); an adaptive
+one may shorten ``h``, save and restore FMU states (``Instance.get_state``/``set_state``)
+and count ``rollbacks``.  A strategy sees the system only through its protocol
+(``y``, ``nodes``, ``ground``/``contacts``/``buildings``, each node's ``pull``/``step``/
+``push``): a system of fake instances tests it without any FMU.
 
 Signal graph (the same for every strategy; see ``Scene.connections``):
 buildings' ``ag`` := ground ``ag_mean``; contact ``x1, v1`` := left
@@ -35,8 +38,10 @@ contact impulse of [t-h, t]: one step of delay, first-order accurate.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from .master import System
+if TYPE_CHECKING:
+    from ..system import System
 
 
 class CouplingStrategy:
@@ -48,7 +53,7 @@ class CouplingStrategy:
 
     name = "base"
 
-    def __init__(self, system: System, t0: float, t_bound: float, step: float):
+    def __init__(self, system: "System", t0: float, t_bound: float, step: float):
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"communication step = {step!r} s must be > 0")
         self.system = system
@@ -77,51 +82,3 @@ class CouplingStrategy:
 
     def _advance(self, t: float, h: float) -> None:
         raise NotImplementedError
-
-
-class GaussSeidel(CouplingStrategy):
-    """Sequential: ground, then contacts (from the buildings at t), then buildings."""
-
-    name = "gauss-seidel"
-
-    def __init__(self, system: System, t0: float, t_bound: float, step: float):
-        super().__init__(system, t0, t_bound, step)
-        self._order = system.ground + system.contacts + system.buildings
-
-    def _advance(self, t: float, h: float) -> None:
-        y = self.system.y
-        for node in self._order:
-            node.step(y, t, h)
-
-
-class Jacobi(CouplingStrategy):
-    """Parallel: every instance reads the outputs at t, then all step."""
-
-    name = "jacobi"
-
-    def _advance(self, t: float, h: float) -> None:
-        y = self.system.y
-        nodes = self.system.nodes
-        for node in nodes:  # every input from the outputs at t, before anything steps
-            node.pull(y)
-        for node in nodes:
-            node.instance.do_step(t, h)
-        for node in nodes:
-            node.push()
-
-
-STRATEGIES: dict[str, type[CouplingStrategy]] = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}
-
-
-def get_strategy(strategy: str | type[CouplingStrategy]) -> type[CouplingStrategy]:
-    if isinstance(strategy, type) and issubclass(strategy, CouplingStrategy):
-        return strategy
-    try:
-        return STRATEGIES[strategy]
-    except KeyError:
-        raise ValueError(f"unknown coupling {strategy!r}; known: {', '.join(STRATEGIES)}") from None
-
-
-# The adaptive strategy with rollback lives in cosim/adaptive.py (it subclasses
-# CouplingStrategy) and registers itself in STRATEGIES when imported.
-from . import adaptive as _adaptive  # noqa: E402,F401

@@ -38,6 +38,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
+from ..fmus import BUILDING, GROUND, POUNDING
+from ..master.coupling import COUPLINGS
+from ..master.loader import load_scene
+from ..master.names import element
+from ..master.scene import ContactLevel, InstanceSpec, Override, Scene
+from ..master.system import Catalog
+
 SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC_NS = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
@@ -478,7 +485,7 @@ def read_ssp(path: Path | str, extract_to: Path | str) -> System:
 # scenes <-> SSP
 # ---------------------------------------------------------------------------------------------
 def scene_system(scene, fmu_dir: Path | str) -> System:
-    """The SSP view of a :class:`cosim.scene.Scene` whose FMUs are in ``fmu_dir``.
+    """The SSP view of a :class:`cosim.master.scene.Scene` whose FMUs are in ``fmu_dir``.
 
     Components, start values and connections are exactly the instances, parameters and
     signal graph the master uses (``scene.instances()``, ``scene.connections()``).
@@ -513,7 +520,7 @@ def export_notes(scene) -> list[str]:
         notes.append(
             f"coupling = {scene.coupling!r} is not expressible in SSP 1.0, which describes structure and "
             f"parameters, not the order in which a master steps the components; it is kept in the "
-            f"{OUR_ANNOTATION!r} annotation (used by cosim.ssp.load_ssp, ignored by other tools). "
+            f"{OUR_ANNOTATION!r} annotation (used by cosim.peers.ssp.load_ssp, ignored by other tools). "
             f"libcosim runs the package with its fixed-step Jacobi algorithm at h = {scene.step:g} s")
     if scene.ground is not None:
         record = str(scene.ground.parameters.get("record", ""))
@@ -537,7 +544,7 @@ def export_scene(scene, path: Path | str, fmu_dir: Path | str) -> tuple[Path, li
 
 
 def load_ssp(path: Path | str, extract_to: Path | str):
-    """Read an SSP package back into a :class:`cosim.scene.Scene` for our master.
+    """Read an SSP package back into a :class:`cosim.master.scene.Scene` for our master.
 
     The FMUs are extracted to ``extract_to`` (run the scene with that folder as the
     FMU folder).  The scene is rebuilt from the standard content: components by FMU
@@ -547,8 +554,6 @@ def load_ssp(path: Path | str, extract_to: Path | str):
     package whose wiring is not the one our master makes is refused, naming the
     connection.
     """
-    from cosim.scene import (BUILDING, COUPLINGS, GROUND, POUNDING, ContactLevel, InstanceSpec, Scene)
-
     path = Path(path)
     system = read_ssp(path, extract_to)
     if system.start_time != 0.0:
@@ -570,11 +575,11 @@ def load_ssp(path: Path | str, extract_to: Path | str):
         ends = []
         for port in ("x1", "x2"):
             con = feeds.get((contact.name, port))
-            m = re.fullmatch(r"x\[(\d+)\]", con.start_connector) if con else None
-            if con is None or m is None or kinds.get(con.start_element) != BUILDING:
+            base, floor = element(con.start_connector) if con else (None, None)
+            if con is None or base != "x" or floor is None or kinds.get(con.start_element) != BUILDING:
                 raise NotExpressibleError(f"{path}: input {contact.name}.{port} is not fed by a building floor "
                                           f"displacement x[i]")
-            ends.append((con.start_element, int(m.group(1))))
+            ends.append((con.start_element, floor))
         levels.append(ContactLevel(contact.name, ends[0][0], ends[1][0], ends[0][1], ends[1][1]))
     ann = dict(system.annotation or {})
     coupling = ann.get("coupling", "jacobi")
@@ -597,38 +602,16 @@ def load_ssp(path: Path | str, extract_to: Path | str):
     return scene
 
 
-def export_cli(scene: str | Path, path: Path | str, overrides: Iterable[str] = (), *, coupling: str | None = None,
-               step: float | None = None, stop_time: float | None = None,
-               fmu_dir: Path | str | None = None) -> int:
-    """``python cosim/run.py SCENE --export-ssp FILE.ssp``: load the scene as a run would
-    (overrides, ``--coupling``, ``--step``, ``--stop-time``), write the package, print the
-    notes.  Exit code 0, or 2 with one ``error:`` line for a scene SSP cannot express or
-    invalid input."""
-    import sys
-
-    from cosim.master import Catalog
-    from cosim.run import default_fmu_dir
-    from cosim.scene import SceneError, load_scene
-
-    extra = list(overrides)
-    if coupling is not None:
-        extra.append(f'coupling="{coupling}"')
-    if step is not None:
-        extra.append(f"step={float(step)!r}")
-    if stop_time is not None:
-        extra.append(f"stop_time={float(stop_time)!r}")
-    try:
-        fmu_dir = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
-        with Catalog(fmu_dir) as catalog:
-            loaded = load_scene(scene, extra, catalog)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", SspWarning)  # printed below as notes
-            out, notes = export_scene(loaded, path, fmu_dir)
-    except (NotExpressibleError, SceneError, ValueError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    for note in notes:
-        print(f"note: {note}")
-    print(f"SSP 1.0 package: {out} ({len(loaded.instances())} components, "
-          f"{len(loaded.connections())} connections)")
-    return 0
+def export(scene: str | Path, path: Path | str, overrides: Iterable[Override | str] = (), *,
+           fmu_dir: Path | str) -> tuple[Path, list[str], Scene]:
+    """Load ``scene`` as a run would (overrides checked against the FMUs in ``fmu_dir``) and write
+    it as an SSP package at ``path``; returns the package, the notes of :func:`export_notes`
+    (not issued as warnings: the caller prints them) and the scene.  Raises
+    :class:`NotExpressibleError` for a scene SSP 1.0 cannot express."""
+    fmu_dir = Path(fmu_dir)
+    with Catalog(fmu_dir) as catalog:
+        loaded = load_scene(scene, overrides, catalog)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SspWarning)
+        out, notes = export_scene(loaded, path, fmu_dir)
+    return out, notes, loaded

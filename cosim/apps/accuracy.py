@@ -1,22 +1,22 @@
 """What accuracy costs in time: every coupling strategy of a scene against the reference.
 
-    python cosim/run.py default --accuracy --out docs/accuracy/default
-    python cosim/run.py kobe --accuracy --out docs/accuracy/kobe
+    pounding-cosim accuracy default --out docs/accuracy/default
+    pounding-cosim accuracy kobe --out docs/accuracy/kobe      (or: python cosim/run.py kobe --accuracy ...)
 
 runs the scene with each strategy over a range of communication steps (or tolerances),
-compares each run with the monolithic reference (:mod:`cosim.reference`, ``solve_ivp``
-DOP853 at rtol 1e-10) and with the OpenSees peer (:mod:`cosim.opensees_peer`) at several
+compares each run with the monolithic reference (:mod:`cosim.peers.reference`, ``solve_ivp``
+DOP853 at rtol 1e-10) and with the OpenSees peer (:mod:`cosim.peers.opensees`) at several
 time steps, and writes ``accuracy.csv``, ``accuracy.md`` and ``accuracy.png`` (log-log
 error against wall time, one curve per strategy, the reference's own time marked).
 
-Strategies (:data:`FAMILIES`):
+Strategies (:data:`FAMILIES`; every registered coupling strategy, :data:`cosim.master.coupling.STRATEGIES`, has at least one):
 
 * ``jacobi``: fixed step, every FMU reads the outputs at t, plain force law
   (``resolve_impacts = false``);
 * ``gauss-seidel``: fixed step, ground, contacts, buildings in turn, plain force law;
 * ``gauss-seidel-resolved``: fixed coarse step, the contact FMU locates and integrates each
   impact inside its own step (``resolve_impacts = true``) as an impact of two free masses;
-* ``adaptive``: :class:`cosim.adaptive.Adaptive`, plain force law, base step 0.01 s, the
+* ``adaptive``: :class:`cosim.master.coupling.adaptive.Adaptive`, plain force law, base step 0.01 s, the
   setting is ``contact_fraction`` (step in contact / impact time scale);
 * ``adaptive-resolved`` (base step 0.01 s) and ``adaptive-resolved-0.02``: the same with the
   contact FMU resolving its impacts;
@@ -30,18 +30,30 @@ only when the counts agree; a co-simulation onset is known to within its communi
 step).  ``error`` is the largest of the three relative errors; ``meets_criteria`` applies
 :data:`CRITERIA` (peak force within 1 %, same number of impacts, dissipated energy within
 2 %, peak displacements within 0.5 %).  A run stopped by the stability guard
-(:class:`cosim.adaptive.InstabilityError`) is listed with its message instead of numbers.
+(:class:`cosim.master.guard.InstabilityError`) is listed with its message instead of numbers.
 """
 from __future__ import annotations
 
 import csv
 import math
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+
+from ..files import replaced_folder
+from ..fmus import default_fmu_dir
+from ..master.coupling import STRATEGIES
+from ..master.guard import InstabilityError
+from ..master.loader import load_scene
+from ..master.results import impact_onsets, summarize
+from ..master.runner import settings
+from ..master.scene import Override
+from ..master.simulate import simulate
+from ..master.system import Catalog, System
+from ..peers.opensees import opensees_available, opensees_for_scene
+from ..peers.reference import reference_for_scene
 
 #: acceptance limits of the brief (relative errors; impacts must agree exactly)
 CRITERIA = dict(peak_force=0.01, dissipated_energy=0.02, peak_displacement=0.005)
@@ -126,7 +138,7 @@ def _rel(value: float, ref: float) -> float:
 
 
 def reference_metrics(ref) -> dict[str, Any]:
-    """The numbers every run is compared with, from a :class:`cosim.reference.ReferenceResult`."""
+    """The numbers every run is compared with, from a :class:`cosim.peers.reference.ReferenceResult`."""
     # total contact dissipation from the energy integral at the end: the per-impact values of
     # the reference attribute the work of every contact active at the same time to each
     return dict(peak_force_N=float(ref.peak_force_N), impacts=int(ref.impacts),
@@ -134,17 +146,6 @@ def reference_metrics(ref) -> dict[str, Any]:
                 peak_displacements_m=[float(np.max(p)) for p in ref.peak_displacements],
                 impact_times_s=sorted(float(i.t_onset) for i in ref.impact_list),
                 wall_time_s=float(ref.wall_time_s), nfev=int(ref.nfev), energy_residual_J=float(ref.energy_residual))
-
-
-def cosim_onsets(result) -> list[float]:
-    """Impact onset times (s) of a co-simulation: the start of the step in which a contact
-    counted a new impact (plain law: the onset lies in the step before; resolved: in this one)."""
-    times = []
-    for c in result.scene.contacts:
-        counts = result[f"{c.name}.impacts"]
-        new = np.flatnonzero(np.diff(counts) > 0)
-        times.extend(float(t) for t in result.time[new])
-    return sorted(times)
 
 
 def score(row: Row, ref: dict[str, Any], peak_force: float, impacts: int, dissipated: float,
@@ -165,24 +166,16 @@ def score(row: Row, ref: dict[str, Any], peak_force: float, impacts: int, dissip
 
 # -- runs ------------------------------------------------------------------------------------------
 def run_cosim(scene_name, family: Family, value: float, catalog, ref: dict[str, Any],
-              overrides: Sequence[str] = (), stop_time: float | None = None, repeats: int = 1) -> Row:
+              overrides: Sequence[Override | str] = (), stop_time: float | None = None, repeats: int = 1) -> Row:
     """One co-simulation run of the study (the fastest of ``repeats``)."""
-    from .adaptive import InstabilityError
-    from .master import System, simulate
-    from .results import summarize
-    from .scene import load_scene
-
-    extra = list(overrides) + [f"pounding.resolve_impacts={'true' if family.resolve_impacts else 'false'}",
-                               f'coupling="{family.coupling}"']
     options: dict[str, Any] = {}
     if family.setting == "step":
-        extra.append(f"step={value!r}")
+        step = value
     else:
-        extra.append(f"step={family.base_step!r}")
+        step = family.base_step
         options[family.setting] = value
-    if stop_time is not None:
-        extra.append(f"stop_time={stop_time!r}")
-    scene = load_scene(scene_name, extra, catalog)
+    extra = list(overrides) + [Override("pounding", "resolve_impacts", family.resolve_impacts)]
+    scene = load_scene(scene_name, extra + settings(family.coupling, step, stop_time), catalog)
     row = Row(family.name, family.setting, value)
     best = None
     with System(scene, catalog) as system:
@@ -192,24 +185,23 @@ def run_cosim(scene_name, family: Family, value: float, catalog, ref: dict[str, 
             except InstabilityError as exc:
                 row.status = f"stopped: {exc}"
                 return row
-            if best is None or result.wall_time_s < best.wall_time_s:
+            if best is None or result.cost.wall_time_s < best.cost.wall_time_s:
                 best = result
     summary = summarize(best)
-    row.wall_time_s = best.wall_time_s
-    row.communication_steps = best.communication_steps
-    row.rollbacks = best.rollbacks
-    row.fmu_calls = best.fmu_calls
-    row.us_per_fmu_call = 1e6 * best.wall_time_s / max(best.fmu_calls, 1)
-    row.energy_residual_relative = summary["energy_residual_relative"]
-    peaks = [summary["buildings"][b.name]["peak_displacement_m"] for b in scene.buildings]
-    return score(row, ref, summary["peak_force_N"], summary["impacts"], summary["dissipated_energy_J"], peaks,
-                 cosim_onsets(best))
+    cost = summary.cost
+    row.wall_time_s = cost.wall_time_s
+    row.communication_steps = cost.communication_steps
+    row.rollbacks = cost.rollbacks
+    row.fmu_calls = cost.fmu_calls
+    row.us_per_fmu_call = cost.us_per_fmu_call
+    row.energy_residual_relative = summary.energy_residual_relative
+    peaks = [summary.buildings[b.name].peak_displacement_m for b in scene.buildings]
+    return score(row, ref, summary.peak_force_N, summary.impacts, summary.dissipated_energy_J, peaks,
+                 impact_onsets(best))
 
 
 def run_peer(scene, dt: float, ref: dict[str, Any]) -> Row:
     """One OpenSees run (JankowskiImpact) of the study."""
-    from .opensees_peer import opensees_for_scene
-
     row = Row("opensees", "dt", dt)
     try:
         peer = opensees_for_scene(scene, dt)
@@ -231,25 +223,18 @@ def run_peer(scene, dt: float, ref: dict[str, Any]) -> Row:
                  [float(np.max(p)) for p in peer.peak_displacements], sorted(onsets))
 
 
-def run_study(scene_name: str, *, fmu_dir=None, catalog=None, overrides: Sequence[str] = (),
+def run_study(scene_name: str, *, fmu_dir=None, catalog=None, overrides: Sequence[Override | str] = (),
               families: Sequence[Family] | None = None, opensees_dts: Sequence[float] | None = None,
               stop_time: float | None = None, repeats: int = 1, reference_rtol: float = 1e-10,
               log: Callable[[str], None] | None = print) -> Study:
     """Run the accuracy/time study of one scene (see module docstring)."""
-    from .master import Catalog
-    from .reference import reference_for_scene
-    from .scene import load_scene
-
     families = FAMILIES if families is None else families
     opensees_dts = OPENSEES_DTS if opensees_dts is None else opensees_dts
     own = catalog is None
     if own:
-        from .run import default_fmu_dir
-
         catalog = Catalog(fmu_dir if fmu_dir is not None else default_fmu_dir())
     try:
-        extra = list(overrides) + ([f"stop_time={stop_time!r}"] if stop_time is not None else [])
-        scene = load_scene(scene_name, extra, catalog)
+        scene = load_scene(scene_name, list(overrides) + settings(stop_time=stop_time), catalog)
         say = log or (lambda s: None)
         say(f"{scene.name}: reference (solve_ivp DOP853, rtol {reference_rtol:g}) ...")
         ref = reference_metrics(reference_for_scene(scene, {"rtol": reference_rtol}))
@@ -262,8 +247,6 @@ def run_study(scene_name: str, *, fmu_dir=None, catalog=None, overrides: Sequenc
                 study.rows.append(row)
                 say("  " + _row_line(row))
         if opensees_dts:
-            from .opensees_peer import opensees_available
-
             if opensees_available():
                 for dt in opensees_dts:
                     row = run_peer(scene, dt, ref)
@@ -388,8 +371,6 @@ def plot(study: Study, path: Path) -> None:
 
 def write_study(study: Study, folder: str | Path) -> Path:
     """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` in ``folder`` (written complete)."""
-    from .files import replaced_folder
-
     with replaced_folder(folder) as tmp:
         write_csv(study, tmp / "accuracy.csv")
         (tmp / "accuracy.md").write_text(markdown(study))
@@ -397,12 +378,21 @@ def write_study(study: Study, folder: str | Path) -> Path:
     return Path(folder)
 
 
-def main(scene: str, out: str | Path | None, overrides: Sequence[str] = (), fmu_dir=None,
-         stop_time: float | None = None) -> int:
-    """``python cosim/run.py SCENE --accuracy [--out DIR]`` (hooked in :mod:`cosim.run`)."""
-    t0 = time.perf_counter()
-    study = run_study(scene, fmu_dir=fmu_dir, overrides=overrides, stop_time=stop_time)
+def study_and_write(scene: str, out: str | Path | None, overrides: Sequence[Override | str] = (), fmu_dir=None,
+                    stop_time: float | None = None, log: Callable[[str], None] | None = print) -> tuple[Study, Path]:
+    """Run the study of ``scene`` and write it into ``out`` (default ``out/<scene>_accuracy``)."""
+    study = run_study(scene, fmu_dir=fmu_dir, overrides=overrides, stop_time=stop_time, log=log)
     folder = write_study(study, Path(out) if out else Path("out") / f"{study.scene}_accuracy")
-    print(markdown(study))
-    print(f"written: {folder} (study wall time {time.perf_counter() - t0:.0f} s)")
-    return 0
+    return study, folder
+
+
+def _check_families() -> None:
+    """Every family runs a registered strategy, and every registered strategy is studied."""
+    unknown = {f.coupling for f in FAMILIES + REDUCED_FAMILIES} - set(STRATEGIES)
+    missing = set(STRATEGIES) - {f.coupling for f in FAMILIES}
+    if unknown or missing:
+        raise ValueError(f"accuracy study families: unknown couplings {sorted(unknown)}, "
+                         f"strategies without a family {sorted(missing)}")
+
+
+_check_families()

@@ -1,0 +1,1 @@
+"""Applications built on the master and the peers: studies, calibration, accuracy study, report."""

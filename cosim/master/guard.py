@@ -1,0 +1,299 @@
+"""The stability guard of every run and the error it raises.
+
+:class:`StabilityGuard` runs after every accepted communication step of every coupling
+strategy (hooked into :func:`cosim.master.simulate.simulate`) and raises
+:class:`InstabilityError` with what to change when a run has stopped meaning anything:
+non-finite outputs, a penetration deeper than all the energy in the system could compress
+the contact spring, energy created by the coupling, or a plain force-law contact stepped
+past a quarter of its impact time scale.
+
+:func:`contact_levels` is how the master sees each contact instance (where its signals live
+in ``System.y`` and its contact law, from the contact law table); the adaptive strategy
+plans its steps with the same view.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fmu_src.contact_laws import MIN_IMPACT_SPEED, ContactLaw, law_for
+
+from .names import column, element_name
+
+if TYPE_CHECKING:
+    from .system import System
+
+# Slowest approach speed the time scale is evaluated at (m/s): below it T = L/v grows
+# without physical meaning (a resting contact has no impact time scale); the contact laws'
+# own floor on a latched impact speed.
+_V_FLOOR = MIN_IMPACT_SPEED
+
+
+class InstabilityError(RuntimeError):
+    """A run produced numbers that cannot be trusted; the message says what to change.
+
+    Attributes: ``t`` (s), ``instance`` (contact or building name, or ``""``), ``reason``
+    (``"non-finite" | "penetration" | "energy"``).
+    """
+
+    def __init__(self, message: str, t: float, instance: str = "", reason: str = ""):
+        super().__init__(message)
+        self.t = t
+        self.instance = instance
+        self.reason = reason
+
+
+# -- per contact: indices into System.y and the contact's physics -------------------------------
+@dataclass
+class _Level:
+    """One contact instance seen from the master: where its signals live in ``System.y``."""
+
+    name: str
+    law: ContactLaw
+    gap: float                  # m
+    resolved: bool              # resolve_impacts
+    ix1: int
+    iv1: int
+    ia1: int
+    ix2: int
+    iv2: int
+    ia2: int
+    i_delta: int                # contact output delta (m)
+    i_F: int                    # contact output F (N)
+    i_vimp: int                 # contact output v_impact (m/s)
+    i_Ediss: int                # contact output E_dissipated (J)
+    CR: float = 0.65            # requested restitution
+
+    def in_contact_scale(self, delta: float, delta_dot: float, v_imp: float, fraction: float) -> float:
+        """Longest step (s) the explicit force-law coupling can take in contact now.
+
+        ``fraction`` times the shortest of: the impact time scale (closing step:
+        :meth:`time_scale`, in contact: ``L(v) / v``); the spring's
+        ``sqrt(m / k_t)``, ``k_t = n k delta^(n-1)``; and ``8 m / c`` for the dashpot ``c =
+        dF/d(delta_dot)`` (an explicit relaxation needs ``h c / m`` well below 1: CR -> 0 makes
+        ``c`` huge).  The dissipated energy's error is a fixed fraction of the impact's kinetic
+        energy per ``h / T``, so relative to what the impact dissipates it grows like
+        ``1 / (1 - CR^2)``: the step shrinks by ``(1 - CR^2) / (1 - 0.65^2)`` (the default was
+        set at CR = 0.65, concrete), at most 16 times.
+        """
+        law = self.law
+        v = max(v_imp, abs(delta_dot), _V_FLOOR)
+        if delta <= 0.0:                      # the step that closes the gap
+            scale = self.time_scale(v)
+        else:                                 # in contact: the spring's scale and the local ones
+            scale = law.length_scale(v) / v
+            k_t = law.n * law.k * delta ** (law.n - 1.0)
+            if k_t > 0.0:
+                scale = min(scale, math.sqrt(law.m / k_t))
+            c = law.force_and_derivatives(delta, delta_dot, v)[2]
+            if c > 0.0 and math.isfinite(c):
+                scale = min(scale, 8.0 * law.m / c)
+        energy = min(1.0, max(1.0 / 16.0, (1.0 - self.CR * self.CR) / (1.0 - 0.65 * 0.65)))
+        return fraction * energy * scale
+
+    def time_scale(self, v: float) -> float:
+        """Impact time scale (s) at approach speed ``v`` (m/s): ``d* / v``.
+
+        ``d*`` is the penetration scale ``L = (m v^2 / k)^(1/(n+1))``, or the distance the
+        dashpot alone stops the bodies in, ``m v / c(d*)``, if shorter (a few fixed-point
+        passes; CR -> 0 makes the dashpot stop the impact long before the spring would).
+        """
+        v = max(abs(v), _V_FLOOR)
+        law = self.law
+        d = law.length_scale(v)
+        for _ in range(4):
+            c = law.force_and_derivatives(d, v, v)[2]
+            if not (c > 0.0 and math.isfinite(c)) or law.m * v / c >= d:
+                break
+            d = law.m * v / c
+        return d / v
+
+    def kinematics(self, y: np.ndarray) -> tuple[float, float, float]:
+        """Host ``delta`` (m), ``delta_dot`` (m/s, > 0 approaching), ``delta_ddot`` (m/s^2)."""
+        item = y.item
+        return (item(self.ix1) - item(self.ix2) - self.gap, item(self.iv1) - item(self.iv2),
+                item(self.ia1) - item(self.ia2))
+
+    def approach_speed(self, y: np.ndarray) -> float:
+        """Speed (m/s) an impact's time scale is taken at: the latched ``v_impact`` or the
+        current closing rate, whichever is larger."""
+        return max(y.item(self.i_vimp), abs(y.item(self.iv1) - y.item(self.iv2)))
+
+
+def contact_levels(system: "System") -> list[_Level]:
+    """The contact levels of ``system`` with the output indices the master needs.
+
+    The contact's parameters as its instance has them (set by the scene, else the FMU's
+    default: :meth:`cosim.master.scene.InstanceSpec.value`); the floors' signals from the
+    scene's contact levels.
+    """
+    index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
+    where = {level.instance: level for level in system.scene.levels}
+    levels = []
+    for node in system.contacts:
+        p = {k: node.spec.value(k) for k in ("gap", "k", "n", "model", "m1", "m2", "CR", "zeta", "resolve_impacts")}
+        law = law_for(p["model"], float(p["k"]), float(p["n"]), float(p["m1"]), float(p["m2"]),
+                      float(p["CR"]), float(p["zeta"]))
+        level = where[node.name]
+        floors = ((level.left, level.floor_left), (level.right, level.floor_right))
+        x1, v1, a1, x2, v2, a2 = (index[column(b, element_name(var, f))] for b, f in floors for var in "xva")
+        out = node.name + "."
+        levels.append(_Level(node.name, law, float(p["gap"]), bool(p["resolve_impacts"]), x1, v1, a1, x2, v2, a2,
+                             index[out + "delta"], index[out + "F"], index[out + "v_impact"],
+                             index[out + "E_dissipated"], float(p["CR"])))
+    return levels
+
+
+# -- the guard -------------------------------------------------------------------------------------
+class StabilityGuard:
+    """Stop a run whose numbers cannot be trusted (see module docstring).
+
+    Checks after every accepted step, with ``E_avail = E_initial + max over time of sum E_input``
+    (J): no mechanical state can hold more energy than was ever put in.
+
+    * non-finite output;
+    * a contact penetration (the contact FMU's ``delta``) beyond ``penetration_factor``
+      times ``((n+1) E_avail / k)^(1/(n+1))``, the penetration at which the contact spring
+      alone would hold all of ``E_avail``;
+    * energy created: a contact's ``E_dissipated < -energy_tol E_avail``, or the contacts'
+      net work on the buildings ``sum E_external > energy_tol E_avail``, or the buildings'
+      ``E_kinetic + E_strain > (1 + energy_tol) E_avail``.
+
+    * a plain-law contact (``resolve_impacts = false``) stepped at more than
+      ``max_step_over_time_scale`` times the impact time scale ``T`` (:meth:`_sampling`); the
+      largest ratio seen is kept in :attr:`step_over_time_scale` for the run's summary.
+
+    ``energy_tol = 0.01``: a coupling that creates 1 % of the energy in the system has
+    changed the response by more than any accuracy a user asks of a pounding study.
+    """
+
+    #: plain-law step / impact time scale beyond which a run stops (its energy error ~ the ratio)
+    max_step_over_time_scale = 0.25
+
+    def __init__(self, system: "System", penetration_factor: float = 2.0, energy_tol: float = 0.01):
+        self.system = system
+        self.penetration_factor = float(penetration_factor)
+        self.energy_tol = float(energy_tol)
+        self.levels = contact_levels(system)
+        index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
+        names = [b.name for b in system.buildings]
+        # plain int lists: the checks run after every step on a handful of scalars, where
+        # y.item(i) is several times cheaper than numpy fancy indexing
+        self._i_input = [index[f"{b}.E_input"] for b in names]
+        self._i_external = [index[f"{b}.E_external"] for b in names]
+        self._i_mech = [index[f"{b}.{v}"] for b in names for v in ("E_kinetic", "E_strain")]
+        # energy stored at t0 in contacts that start closed (allow_initial_overlap): it is in
+        # the system, and a contact that releases it reports it as negative dissipation
+        self._stored0 = [lv.law.elastic_energy(lv.kinematics(system.y)[0]) for lv in self.levels]
+        self.E_initial = sum(system.y.item(i) for i in self._i_mech) + sum(self._stored0)
+        self.E_avail = self.E_initial
+        self._limits = [0.0] * len(self.levels)
+        self._update_limits()
+        #: largest communication step / impact time scale seen in contact, per plain-law contact
+        self.step_over_time_scale = {lv.name: 0.0 for lv in self.levels if not lv.resolved}
+
+    def _update_limits(self) -> None:
+        E = self.E_avail
+        self._limits = [self.penetration_factor * ((lv.law.n + 1.0) * E / lv.law.k) ** (1.0 / (lv.law.n + 1.0))
+                        + 1e-12 for lv in self.levels]
+
+    def penetration_limit(self) -> list[float]:
+        """Deepest credible penetration of each contact now (m)."""
+        return list(self._limits)
+
+    def problem(self, t: float, h: float) -> InstabilityError | None:
+        """The first problem found after the step that ended at ``t`` (step ``h``), or None."""
+        y = self.system.y
+        if not math.isfinite(y.sum()):      # one reduction; a non-finite entry makes the sum non-finite
+            bad = self.system.columns[int(np.flatnonzero(~np.isfinite(y))[0])] if not np.isfinite(y).all() \
+                else "(sum of outputs)"
+            return InstabilityError(f"t = {t:.6g} s: output {bad} is not finite: {self._advice(None, h)}",
+                                    t, bad.split(".")[0], "non-finite")
+        item = y.item
+        E_in = self.E_initial
+        for i in self._i_input:
+            E_in += item(i)
+        if E_in > self.E_avail:
+            self.E_avail = E_in
+            self._update_limits()
+        tol = self.energy_tol * self.E_avail + 1e-9
+        for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
+            delta = item(lv.i_delta)
+            if delta > limit:
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: penetration {delta:.3g} m is beyond physical sense "
+                    f"(all {self.E_avail:.3g} J in the system would compress the contact only "
+                    f"{limit / self.penetration_factor:.3g} m): {self._advice(lv, h)}", t, lv.name, "penetration")
+            if delta > 0.0 and not lv.resolved:
+                error = self._sampling(lv, t, h)
+                if error is not None:
+                    return error
+            if item(lv.i_Ediss) < -tol - stored0:
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: the contact created {-item(lv.i_Ediss) - stored0:.3g} J "
+                    f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
+                    t, lv.name, "energy")
+        if self.levels:
+            work = -sum(self._stored0)
+            for i in self._i_external:
+                work += item(i)
+            if work > tol:
+                lv = max(self.levels, key=lambda lv: item(lv.i_F))
+                return InstabilityError(
+                    f"t = {t:.6g} s: the contact forces did {work:.3g} J of net work on the buildings "
+                    f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
+                    t, lv.name, "energy")
+        mech = 0.0
+        for i in self._i_mech:
+            mech += item(i)
+        if mech > self.E_avail + tol:
+            lv = max(self.levels, key=lambda lv: item(lv.i_F)) if self.levels else None
+            return InstabilityError(
+                f"t = {t:.6g} s: the buildings hold {mech:.3g} J, more than the {self.E_avail:.3g} J ever put "
+                f"in: {self._advice(lv, h)}", t, lv.name if lv else "", "energy")
+        return None
+
+    def _sampling(self, level: _Level, t: float, h: float) -> InstabilityError | None:
+        """Track ``h / T`` of a plain-law contact in contact, ``T = L / v`` the spring's impact
+        time scale (``L = (m v^2 / k)^(1/(n+1))``, ``v`` the approach speed); an error once it
+        exceeds :attr:`max_step_over_time_scale`.
+
+        The plain force law is held over each step (first order in ``h``): the accuracy tables
+        (docs/accuracy.md, Jankowski law at CR 0.65) show its dissipated-energy error close to
+        ``h / T`` itself (0.8-1.2 times it on the default and Kobe scenes), so past a quarter of
+        the time scale the run no longer says anything about the impacts, stable or not.  (At
+        low CR the dashpot stops the bodies sooner, but nearly all the energy is dissipated
+        whatever the step; at high CR the same absolute error is a larger part of the little
+        that is dissipated: the warning says so.)
+        """
+        v = level.approach_speed(self.system.y)
+        if v <= _V_FLOOR:                      # resting contact: no impact to resolve
+            return None
+        ratio = h * v / level.law.length_scale(v)
+        if ratio > self.step_over_time_scale[level.name]:
+            self.step_over_time_scale[level.name] = ratio
+        if ratio <= self.max_step_over_time_scale:
+            return None
+        return InstabilityError(
+            f"{level.name}: t = {t:.6g} s: a step of {ratio:.2g} impact time scales would leave the dissipated "
+            f"energy off by about {min(ratio, 1.0):.0%}: {self._advice(level, h)}", t, level.name, "resolution")
+
+    def check(self, t: float, h: float) -> None:
+        error = self.problem(t, h)
+        if error is not None:
+            raise error
+
+    def _advice(self, level: _Level | None, h: float) -> str:
+        if level is None:
+            return f"the communication step {h:.3g} s is too long for this scene; use a shorter step"
+        T = level.time_scale(level.approach_speed(self.system.y))
+        step = 0.02 * T  # the plain law's dissipated-energy error is about h / T: 2 % (docs/accuracy.md)
+        if level.resolved:
+            return (f"the communication step {h:.3g} s is too long for the resolved impacts to hand their "
+                    f"impulse to the buildings; use a step below {step:.2g} s")
+        return (f"plain force-law contact (resolve_impacts=false) cannot follow an impact of time scale "
+                f"{T:.2g} s with a communication step of {h:.3g} s; use resolve_impacts=true, "
+                f"coupling=\"adaptive\", or a step below {step:.2g} s")

@@ -1,0 +1,164 @@
+"""Writing a run's results: ``history.csv``, ``summary.json``, PNG plots, and the terminal summary.
+
+Folders are written completely under a temporary sibling name and renamed at the end
+(:func:`cosim.files.replaced_folder`): a folder under its final name is always complete.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..files import replaced_folder
+from .names import column, element_name
+from .results import SimulationResult, Summary, energy_history, impact_times, summarize
+
+
+def format_summary(summary: Summary) -> str:
+    """A short human-readable block for the terminal."""
+    s, cost = summary, summary.cost
+    lines = [f"scene {s.scene}: {s.description}".rstrip(": "),
+             f"  {s.coupling}, h = {s.step_s:g} s, t = 0..{s.stop_time_s:g} s, "
+             f"{cost.communication_steps} steps, {cost.fmu_calls} FMI calls, "
+             f"wall time {cost.wall_time_s:.3f} s"]
+    for name, b in s.buildings.items():
+        lines.append(f"  {name:<10} peak displacement {b.peak_displacement_m:.4g} m (floor "
+                     f"{b.peak_displacement_floor}), peak drift {b.peak_drift_m:.4g} m "
+                     f"(storey {b.peak_drift_storey})")
+    if s.contacts:
+        lines.append(f"  pounding: {s.impacts} impacts, peak force {s.peak_force_N:.4g} N, "
+                     f"dissipated {s.dissipated_energy_J:.4g} J")
+    else:
+        lines.append("  no contact element")
+    lines.append(f"  energy: input {s.energy_initial_J + 0:.4g} J initial + "
+                 f"{s.energy_input_J - s.energy_initial_J:.4g} J ground; residual "
+                 f"{s.energy_residual_J:.3g} J ({100 * s.energy_residual_relative:.3g} %)")
+    lines += [f"  warning: {w}" for w in s.warnings]
+    return "\n".join(lines)
+
+
+def write_history(result: SimulationResult, path: Path) -> None:
+    """``history.csv``: ``time`` and every column, one row per communication point."""
+    header = ",".join(["time"] + result.columns)
+    data = np.column_stack([result.time, result.values])
+    # 10 significant digits: far below every tolerance the tests use
+    np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
+
+
+def write_results(result: SimulationResult, folder: str | Path, plots: bool = True,
+                  summary: Summary | None = None) -> Path:
+    """Write ``history.csv``, ``summary.json`` and the plots into ``folder``.
+
+    Everything goes to a temporary sibling first, renamed at the end; an
+    existing ``folder`` is replaced only once the new one is complete.
+    """
+    with replaced_folder(folder) as tmp:
+        summary = summary or summarize(result)
+        write_history(result, tmp / "history.csv")
+        (tmp / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
+        if plots:
+            plot_all(result, tmp)
+    return Path(folder)
+
+
+# -- plots -------------------------------------------------------------------------------------------
+def plot_all(result: SimulationResult, folder: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = [plot_displacements(result, folder / "displacements.png", plt),
+           plot_energy(result, folder / "energy.png", plt)]
+    if result.scene.contacts:
+        out += [plot_contact_force(result, folder / "contact_force.png", plt),
+                plot_hysteresis(result, folder / "hysteresis.png", plt)]
+    return out
+
+
+
+def _finish(fig, ax, path: Path, plt, title: str, loc: str = "best") -> None:
+    """Title, grid and legend as every result plot has them; save at 110 dpi and free the figure."""
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc=loc, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+def plot_displacements(result: SimulationResult, path: Path, plt) -> Path:
+    scene = result.scene
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    floors: dict[str, set[int]] = {b.name: {scene.n_storeys(b.name)} for b in scene.buildings}
+    for level in scene.levels:
+        floors[level.left].add(level.floor_left)
+        floors[level.right].add(level.floor_right)
+    for b in scene.buildings:
+        for f in sorted(floors[b.name], reverse=True)[:3]:  # top floor and up to two pounding floors
+            ax.plot(result.time, result[column(b.name, element_name("x", f))], lw=0.9, label=f"{b.name} floor {f}")
+    marked = False
+    for level in scene.levels:
+        times = impact_times(result, level.instance)
+        if times.size:
+            k = np.searchsorted(result.time, times)
+            ax.plot(times, result[column(level.left, element_name("x", level.floor_left))][k], "rv", ms=5,
+                    label=None if marked else "impact")
+            marked = True
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("displacement relative to the ground [m]")
+    _finish(fig, ax, path, plt, f"{scene.name}: floor displacements", loc="upper right")
+    return path
+
+
+def plot_contact_force(result: SimulationResult, path: Path, plt) -> Path:
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for c in result.scene.contacts:
+        line, = ax.plot(result.time, result[f"{c.name}.F"] / 1e3, lw=0.9, label=f"{c.name} mean F over step")
+        if result.has(f"{c.name}.F_max"):  # the FMU's running maximum of the instantaneous force
+            ax.plot(result.time, result[f"{c.name}.F_max"] / 1e3, "--", lw=0.8, color=line.get_color(),
+                    label=f"{c.name} peak force so far")
+        times = impact_times(result, c.name)
+        if times.size:
+            ax.plot(times, np.zeros_like(times), "|", color=line.get_color(), ms=10)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("contact force [kN]")
+    _finish(fig, ax, path, plt, f"{result.scene.name}: contact force", loc="upper right")
+    return path
+
+
+def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
+    """Contact force against penetration at the communication points.
+
+    The mean force of a step is plotted against the penetration at its end:
+    with impacts shorter than the step the loop is sampled coarsely (run
+    with a small ``step`` to resolve it, as ``single_impact`` does).
+    """
+    fig, ax = plt.subplots(figsize=(6, 5))
+    for c in result.scene.contacts:
+        if not result.has(f"{c.name}.delta"):
+            continue
+        delta = result[f"{c.name}.delta"]
+        force = result[f"{c.name}.F"]
+        on = (delta > 0) | (force > 0)  # NaN elsewhere: one polyline per contact episode
+        d = np.where(on, delta, np.nan)
+        ax.plot(d * 1e3, np.where(on, force, np.nan) / 1e3, ".-", lw=0.8, ms=3, label=c.name)
+    ax.set_xlabel("penetration delta [mm]")
+    ax.set_ylabel("contact force (mean over step) [kN]")
+    _finish(fig, ax, path, plt, f"{result.scene.name}: force-penetration loops")
+    return path
+
+
+def plot_energy(result: SimulationResult, path: Path, plt) -> Path:
+    e = energy_history(result)
+    t = e["time"]
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    parts = [e["kinetic"], e["strain"], e["damping"], e["contact"]]
+    labels = ["kinetic", "strain", "structural damping", "contact dissipation"]
+    ax.stackplot(t, *[p / 1e3 for p in parts], labels=labels, alpha=0.75)
+    ax.plot(t, e["input"] / 1e3, "k-", lw=1.2, label="input (initial + ground)")
+    ax.plot(t, e["residual"] / 1e3, "r--", lw=1.0, label="residual")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("energy [kJ]")
+    _finish(fig, ax, path, plt, f"{result.scene.name}: energy balance", loc="upper left")
+    return path

@@ -1,0 +1,330 @@
+"""The result of a run: its history, a typed summary and its cost (one shape for every application).
+
+:class:`SimulationResult` is what :func:`cosim.master.simulate.simulate` returns (like
+scipy's ``OdeResult``): the recorded outputs of every instance and the run's :class:`Cost`.
+:func:`summarize` condenses it into a :class:`Summary` (its ``to_dict()`` is
+``summary.json``); :class:`RunResult` (history, summary, cost, result folder) is what
+:func:`cosim.master.runner.run_scene` returns.  Studies, the accuracy study and the
+calibration read these fields; none re-derives them.  Writing them to files is
+:mod:`cosim.master.output`.
+
+Energy balance (J), from the outputs of the FMUs alone::
+
+    E_initial + sum_buildings E_input(t)
+        = sum_buildings (E_kinetic + E_strain + E_damping)(t)
+          + sum_contacts E_dissipated(t) + residual(t)
+
+``E_initial`` is the mechanical energy the buildings start with (x0, v0),
+``E_input`` the work of the ground motion on the relative motion.  In a
+monolithic solution the residual is the elastic energy stored in contacts
+that are closed at t (zero once they open); in co-simulation it also holds
+the coupling error: the work the buildings receive from the mean contact
+forces minus what the contact FMUs account for.  ``energy_residual_relative``
+divides by ``E_initial + E_input`` at the end.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping
+
+import numpy as np
+
+from .names import column, element_name
+
+if TYPE_CHECKING:
+    from .scene import Scene
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What a run cost: ``wall_time_s`` (the simulation loop, s), accepted
+    ``communication_steps``, ``rollbacks`` (rejected and retried steps), ``fmu_calls`` (every
+    FMI call) and ``do_steps`` (fmi2DoStep calls per instance)."""
+
+    wall_time_s: float
+    communication_steps: int
+    rollbacks: int
+    fmu_calls: int
+    do_steps: Mapping[str, int] = field(default_factory=dict)
+
+    @property
+    def do_step_calls(self) -> int:
+        """fmi2DoStep calls over every instance."""
+        return sum(self.do_steps.values())
+
+    @property
+    def us_per_fmu_call(self) -> float:
+        """Wall time per FMI call (us)."""
+        return 1e6 * self.wall_time_s / max(self.fmu_calls, 1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The cost keys of ``summary.json``."""
+        return dict(wall_time_s=self.wall_time_s, communication_steps=self.communication_steps,
+                    rollbacks=self.rollbacks, fmu_calls=self.fmu_calls, do_step_calls=self.do_step_calls)
+
+
+@dataclass
+class SimulationResult:
+    """Every recorded output of a run, plus its cost.
+
+    ``time`` (s), ``values[k, j]`` = column ``columns[j]`` (``instance.variable``) at
+    ``time[k]``; ``strategy`` the coupling's name; ``stats`` its own counters (adaptive).
+    """
+
+    scene: "Scene"
+    strategy: str
+    time: np.ndarray
+    columns: list[str]
+    values: np.ndarray
+    cost: Cost
+    instances: list[str] = field(default_factory=list)
+    stats: dict[str, Any] = field(default_factory=dict)   # strategy-specific counters (adaptive)
+
+    @property
+    def energy_residual_J(self) -> float:
+        """Energy balance residual at the end (J), see the module docstring."""
+        return float(energy_history(self)["residual"][-1])
+
+    def __getitem__(self, column: str) -> np.ndarray:
+        try:
+            return self.values[:, self.columns.index(column)]
+        except ValueError:
+            raise KeyError(f"no column {column!r}") from None
+
+    def has(self, column: str) -> bool:
+        return column in self.columns
+
+
+@dataclass(frozen=True)
+class ContactSummary:
+    """One contact instance over a run (SI units in the names)."""
+
+    impacts: int
+    peak_force_N: float
+    peak_mean_force_N: float
+    dissipated_energy_J: float
+    max_penetration_m: float
+    first_impact_s: float | None
+    #: plain force law: the largest communication step / impact time scale seen (else None)
+    step_over_time_scale: float | None = None
+    #: the largest latched approach speed (m/s); not a key of summary.json
+    peak_impact_velocity_m_s: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        out = dict(impacts=self.impacts, peak_force_N=self.peak_force_N, peak_mean_force_N=self.peak_mean_force_N,
+                   dissipated_energy_J=self.dissipated_energy_J, max_penetration_m=self.max_penetration_m,
+                   first_impact_s=self.first_impact_s)
+        if self.step_over_time_scale is not None:
+            out["step_over_time_scale"] = self.step_over_time_scale
+        return out
+
+
+@dataclass(frozen=True)
+class BuildingSummary:
+    """One building over a run: peak floor displacement (and where, when), peak drift, base shear."""
+
+    n_storeys: int
+    peak_displacement_m: float
+    peak_displacement_floor: int
+    peak_displacement_time_s: float
+    peak_drift_m: float
+    peak_drift_storey: int
+    peak_base_shear_N: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(n_storeys=self.n_storeys, peak_displacement_m=self.peak_displacement_m,
+                    peak_displacement_floor=self.peak_displacement_floor,
+                    peak_displacement_time_s=self.peak_displacement_time_s, peak_drift_m=self.peak_drift_m,
+                    peak_drift_storey=self.peak_drift_storey, peak_base_shear_N=self.peak_base_shear_N)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """The numbers a person wants from a run (SI units in the names); ``to_dict()`` is
+    ``summary.json``.  Energies at the end of the run (J), see the module docstring."""
+
+    scene: str
+    description: str
+    coupling: str
+    step_s: float
+    stop_time_s: float
+    instances: list[str]
+    peak_force_N: float
+    impacts: int
+    dissipated_energy_J: float
+    buildings: dict[str, BuildingSummary]
+    contacts: dict[str, ContactSummary]
+    energy_initial_J: float
+    energy_input_J: float
+    energy_kinetic_J: float
+    energy_strain_J: float
+    energy_damping_J: float
+    energy_contact_J: float
+    energy_residual_J: float
+    energy_residual_relative: float
+    cost: Cost
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def max_penetration_m(self) -> float:
+        """Deepest penetration of any contact (m)."""
+        return max([c.max_penetration_m for c in self.contacts.values()], default=0.0)
+
+    @property
+    def first_impact_s(self) -> float | None:
+        """Time of the first impact of any contact (s), None without impacts."""
+        firsts = [c.first_impact_s for c in self.contacts.values() if c.first_impact_s is not None]
+        return min(firsts) if firsts else None
+
+    @property
+    def peak_impact_velocity_m_s(self) -> float:
+        """Largest approach speed latched by any contact (m/s)."""
+        return max([c.peak_impact_velocity_m_s for c in self.contacts.values()], default=0.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``summary.json``: the keys and their order as the package has always written them."""
+        out: dict[str, Any] = dict(
+            scene=self.scene, description=self.description, coupling=self.coupling, step_s=self.step_s,
+            stop_time_s=self.stop_time_s, instances=list(self.instances), peak_force_N=self.peak_force_N,
+            impacts=self.impacts, dissipated_energy_J=self.dissipated_energy_J,
+            buildings={name: b.to_dict() for name, b in self.buildings.items()},
+            contacts={name: c.to_dict() for name, c in self.contacts.items()},
+            energy_initial_J=self.energy_initial_J, energy_input_J=self.energy_input_J,
+            energy_kinetic_J=self.energy_kinetic_J, energy_strain_J=self.energy_strain_J,
+            energy_damping_J=self.energy_damping_J, energy_contact_J=self.energy_contact_J,
+            energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
+        out.update(self.cost.to_dict())
+        out["warnings"] = list(self.warnings)
+        return out
+
+
+@dataclass
+class RunResult:
+    """One run of a scene (:func:`cosim.master.runner.run_scene`): the validated ``scene``, the
+    history ``result``, its ``summary`` and ``cost``, and the result ``folder`` (None when
+    nothing was written)."""
+
+    scene: "Scene"
+    result: SimulationResult
+    summary: Summary
+    folder: Path | None = None
+
+    @property
+    def cost(self) -> Cost:
+        return self.result.cost
+
+
+def _final(result: SimulationResult, name: str) -> float:
+    return float(result[name][-1]) if result.has(name) else 0.0
+
+
+def impact_times(result: SimulationResult, contact: str) -> np.ndarray:
+    """End times (s) of the communication steps in which ``contact`` counted a new impact."""
+    counts = result[column(contact, "impacts")]
+    new = np.flatnonzero(np.diff(counts) > 0) + 1
+    return result.time[new]
+
+
+def impact_onsets(result: SimulationResult) -> list[float]:
+    """Start times (s) of the communication steps in which any contact counted a new impact,
+    sorted (the resolved contact's onset lies in that step; the plain law's in the step before)."""
+    times = []
+    for c in result.scene.contacts:
+        counts = result[column(c.name, "impacts")]
+        new = np.flatnonzero(np.diff(counts) > 0)
+        times.extend(float(t) for t in result.time[new])
+    return sorted(times)
+
+
+def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
+    """Energy terms over time (J), summed over buildings / contacts."""
+    scene = result.scene
+    zero = np.zeros_like(result.time)
+
+    def total(instances, variable):
+        out = zero.copy()
+        for name in instances:
+            if result.has(column(name, variable)):
+                out = out + result[column(name, variable)]
+        return out
+
+    buildings = [b.name for b in scene.buildings]
+    contacts = [c.name for c in scene.contacts]
+    kinetic = total(buildings, "E_kinetic")
+    strain = total(buildings, "E_strain")
+    initial = kinetic[0] + strain[0]
+    terms = dict(time=result.time, input=initial + total(buildings, "E_input"), kinetic=kinetic, strain=strain,
+                 damping=total(buildings, "E_damping"), contact=total(contacts, "E_dissipated"),
+                 external=total(buildings, "E_external"))
+    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"])
+    return terms
+
+
+def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
+    fmax = result[column(name, "F_max")] if result.has(column(name, "F_max")) else result[column(name, "F")]
+    delta = result[column(name, "delta")] if result.has(column(name, "delta")) else np.zeros(1)
+    times = impact_times(result, name)
+    ratio = result.stats.get("step_over_time_scale", {}).get(name)
+    v_impact = (float(np.max(np.abs(result[column(name, "v_impact")])))
+                if result.has(column(name, "v_impact")) else 0.0)
+    return ContactSummary(
+        impacts=int(_final(result, column(name, "impacts"))),
+        peak_force_N=float(np.max(fmax)),
+        peak_mean_force_N=float(np.max(result[column(name, "F")])),
+        dissipated_energy_J=_final(result, column(name, "E_dissipated")),
+        max_penetration_m=float(max(0.0, np.max(delta))),
+        first_impact_s=float(times[0]) if times.size else None,
+        # plain force law: how finely the master sampled its impacts
+        step_over_time_scale=float(ratio) if ratio is not None else None,
+        peak_impact_velocity_m_s=v_impact)
+
+
+def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSummary:
+    x = np.abs(np.column_stack([result[column(name, element_name("x", i))] for i in range(1, n + 1)]))
+    d = np.abs(np.column_stack([result[column(name, element_name("drift", i))] for i in range(1, n + 1)]))
+    kx, fx = np.unravel_index(np.argmax(x), x.shape)
+    kd, fd = np.unravel_index(np.argmax(d), d.shape)
+    return BuildingSummary(
+        n_storeys=n, peak_displacement_m=float(x[kx, fx]), peak_displacement_floor=int(fx + 1),
+        peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[kd, fd]),
+        peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))))
+
+
+def summarize(result: SimulationResult) -> Summary:
+    """The numbers a person wants from a run (SI units in the names)."""
+    scene = result.scene
+    contacts = {c.name: _contact_summary(result, c.name) for c in scene.contacts}
+    buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name)) for b in scene.buildings}
+    e = energy_history(result)
+    energy_in = float(e["input"][-1])
+    residual = float(e["residual"][-1])
+    return Summary(
+        scene=scene.name, description=scene.description, coupling=result.strategy, step_s=scene.step,
+        stop_time_s=float(result.time[-1]), instances=list(result.instances),
+        peak_force_N=max([c.peak_force_N for c in contacts.values()], default=0.0),
+        impacts=sum(c.impacts for c in contacts.values()),
+        dissipated_energy_J=sum(c.dissipated_energy_J for c in contacts.values()),
+        buildings=buildings, contacts=contacts,
+        energy_initial_J=float(e["input"][0]), energy_input_J=energy_in, energy_kinetic_J=float(e["kinetic"][-1]),
+        energy_strain_J=float(e["strain"][-1]), energy_damping_J=float(e["damping"][-1]),
+        energy_contact_J=float(e["contact"][-1]), energy_residual_J=residual,
+        energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
+        cost=result.cost, warnings=sampling_warnings(contacts))
+
+
+#: plain-law step / impact time scale above which a run's summary warns (energy error ~ ratio)
+SAMPLING_WARNING = 0.02
+
+
+def sampling_warnings(contacts: Mapping[str, ContactSummary]) -> list[str]:
+    """What a person must know before trusting the numbers of a run that completed: plain-law
+    contacts stepped too coarsely to resolve their impacts."""
+    out = []
+    for name, c in contacts.items():
+        ratio = c.step_over_time_scale or 0.0
+        if ratio > SAMPLING_WARNING:
+            out.append(f"{name}: plain force law stepped at up to {ratio:.2g} times the impact time scale: "
+                       f"expect its dissipated energy off by about {ratio:.0%} at CR 0.65 (more at higher CR), "
+                       f"its peak force by less (docs/accuracy.md); use resolve_impacts=true or coupling=\"adaptive\"")
+    return out

@@ -1,0 +1,64 @@
+"""Plain contact mode of ``pounding.fmu``: the force law on the host's current inputs only.
+
+Pure physics (SI units, no FMI); the comparison to the in-step resolver (:mod:`.resolver`).
+"""
+from __future__ import annotations
+
+import math
+
+from .contact_laws import ContactLaw
+
+class PlainContact:
+    """The force law evaluated on the host's current ``delta``, ``delta_dot`` only.
+
+    ``v_imp`` is latched when a contact begins (``|delta_dot|`` at the first step found in
+    contact).  The host applies the returned force over the whole step, so the work done on
+    the contact in a step is ``F (delta_new - delta_old)``; the dissipated energy is that
+    work minus the energy stored in the spring.
+    """
+
+    def __init__(self, law: ContactLaw):
+        self.law = law
+        self.in_contact = False
+        self.v_imp = 0.0
+        self.F = 0.0                # N, force applied over the current step
+        self.delta_prev = 0.0
+        self.work = 0.0             # J, work done on the contact so far
+        self.impacts = 0
+        self.F_max = 0.0
+        self.delta_max = 0.0
+        self.impact_time = 0.0
+        self.started = False
+        self.last_CR = math.nan     # -delta_dot / v_imp at the first inputs found out of contact
+        self.last_E = 0.0           # J, dissipated by the latest completed contact
+        self._E_at_onset = 0.0
+
+    def step(self, delta: float, delta_dot: float, h: float) -> float:
+        """Force [N] for the step of length ``h`` [s] starting at the given inputs."""
+        if self.started:
+            self.work += self.F * (delta - self.delta_prev)
+        self.started = True
+        self.delta_prev = delta
+        if delta > 0.0:
+            if not self.in_contact:
+                self.in_contact = True
+                self.impacts += 1
+                self.v_imp = abs(delta_dot)
+                self.delta_max = 0.0
+                self.impact_time = 0.0
+                self._E_at_onset = self.dissipated_energy()
+            self.delta_max = max(self.delta_max, delta)
+            self.impact_time += h
+            self.F = self.law.force(delta, delta_dot, self.v_imp)
+        else:
+            if self.in_contact:
+                self.in_contact = False
+                self.last_CR = max(0.0, -delta_dot) / self.v_imp if self.v_imp > 0.0 else math.nan
+                self.last_E = self.dissipated_energy() - self._E_at_onset
+            self.F = 0.0
+        self.F_max = max(self.F_max, self.F)
+        return self.F
+
+    def dissipated_energy(self) -> float:
+        """Work done on the contact minus the elastic energy stored at the latest inputs [J]."""
+        return self.work - self.law.elastic_energy(self.delta_prev)
