@@ -6,6 +6,8 @@
     pounding-cosim calibrate --model crvk --m1 200 --m2 200 --k 1.8974e11 --v 10 --cr 0.4
     pounding-cosim report --out docs/reproduction [--quick]
     pounding-cosim accuracy SCENE [--out DIR]
+    pounding-cosim spectrum RECORD [RECORD ...] [--damping 0.05] [--periods 0.02:10:100] [--out DIR]
+    pounding-cosim separation SCENE [--records R ...] [--pga G] [--no-check] [--out DIR]
     pounding-cosim build-fmus [--out DIR] [--force] [NAME ...]
     pounding-cosim export-ssp SCENE FILE.ssp;  pounding-cosim cr-table;  pounding-cosim fmu-docs;  pounding-cosim opensees SCENE
     pounding-cosim --version
@@ -53,7 +55,7 @@ def exit_code(exc: BaseException) -> int:
     if isinstance(exc, InstabilityError):   # the run went unphysical: nothing was written
         return EXIT_FAILED
     if isinstance(exc, (BadInput, SceneError, StudyError, CalibrationError, NotExpressibleError,
-                        FileNotFoundError)):
+                        FileNotFoundError, FileExistsError)):
         return EXIT_BAD_INPUT
     raise exc
 
@@ -120,6 +122,47 @@ def cmd_accuracy(args) -> int:
                                     stop_time=args.stop_time)
     print(markdown(study))
     print(f"written: {folder} (study wall time {time.perf_counter() - t0:.0f} s)")
+    return EXIT_OK
+
+
+def cmd_spectrum(args) -> int:
+    from .apps.spectra import period_grid, record_spectra, summary_lines, write_spectrum
+
+    try:
+        periods = period_grid(args.periods)
+        spectra = record_spectra(args.records, periods, args.damping, fmt=args.format, dt=args.dt, units=args.units,
+                                 target_pga_g=args.pga)
+    except ValueError as exc:   # a record, a period or the damping: the input's fault
+        raise BadInput(str(exc)) from None
+    out = args.out if args.out is not None else Path("out") / "spectra"
+    out.mkdir(parents=True, exist_ok=True)
+    stem = "_".join(s.name for s in spectra) + f"_zeta{args.damping:g}"
+    paths = write_spectrum(spectra, out, stem, plot=not args.no_plots)
+    print("\n".join(summary_lines(spectra)))
+    print("written: " + ", ".join(str(p) for p in paths))
+    return EXIT_OK
+
+
+def cmd_separation(args) -> int:
+    from .apps.separation_scene import format_separations, scene_separations, write_separations
+    from .master import Catalog, load_scene
+
+    overrides = _overrides(args.overrides)
+    name = load_scene(args.scene, overrides).name
+    with Catalog(_fmu_dir(args.fmu_dir)) as catalog:
+        try:
+            rows = scene_separations(args.scene, overrides, args.records, args.pga, check=not args.no_check,
+                                     method=args.method, catalog=catalog)
+        except ValueError as exc:   # SceneError, a record that cannot be read: the input's fault
+            raise BadInput(str(exc)) from None
+    print(format_separations(rows))
+    folder = write_separations(rows, args.out if args.out is not None else Path("out") / f"{name}_separation",
+                               plots=not args.no_plots)
+    print(f"results: {folder}")
+    failed = [r for r in rows if r.check is not None and not r.check.passed]
+    if failed:
+        print(f"warning: {len(failed)} check(s) failed: the co-simulation did not confirm contact at 0.99 S and none "
+              f"at 1.01 S", file=sys.stderr)
     return EXIT_OK
 
 
@@ -297,6 +340,42 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--stop-time", type=float, help="end time in s (default: the scene's)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
     p.add_argument("--out", type=Path, help="result folder (default: out/<scene>_accuracy)")
+
+    from fmu_src.ground_records import FORMATS, UNITS
+    from fmu_src.response_spectrum import DEFAULT_DAMPING
+
+    p = add("spectrum", cmd_spectrum, "elastic response spectra of records (displacement, pseudo-velocity, "
+                                      "pseudo-acceleration): a CSV table and a log-log plot")
+    p.add_argument("records", nargs="+", metavar="RECORD",
+                   help="bundled record name (elcentro1940 kobe1995 sanfernando1971 parkfield1966) or a file")
+    p.add_argument("--damping", type=float, default=DEFAULT_DAMPING, help="damping ratio (default %(default)s)")
+    p.add_argument("--periods", nargs="+", metavar="T",
+                   help="periods in s, or START:STOP:NUM log-spaced (default 0.02:10:100)")
+    p.add_argument("--pga", type=float, metavar="G", help="scale each record to this PGA in g (default: as recorded)")
+    p.add_argument("--format", choices=FORMATS, default="auto", help="file format (default %(default)s)")
+    p.add_argument("--dt", type=float, help="sampling interval in s of a single-column file")
+    p.add_argument("--units", choices=sorted(UNITS), default="g", help="units of the file's values (default g)")
+    p.add_argument("--out", type=Path, help="folder for <records>_zeta<damping>.csv/.png (default out/spectra); "
+                                            "existing files are never replaced")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plot")
+
+    p = add("separation", cmd_separation,
+            "the separation that avoids pounding at each level of a scene, per record, beside the code rules "
+            "(ABS, SRSS, EC8 0.7 SRSS, DDC) from histories and spectra, checked by co-simulation at 0.99 and "
+            "1.01 times it")
+    p.add_argument("scene", help="scene file or bundled scene name")
+    p.add_argument("--records", nargs="+", metavar="RECORD",
+                   help="records to use instead of the scene's (bundled names or files; the scene's scaling applies)")
+    p.add_argument("--pga", type=float, metavar="G", help="scale every record to this PGA in g")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="INSTANCE.VAR=VALUE",
+                   help="scene override, as for run (repeatable)")
+    p.add_argument("--method", choices=("exact", "bisection"),
+                   help="exact (linear buildings at rest, the default where it applies) or bisection on the gap "
+                        "with co-simulation runs (any building)")
+    p.add_argument("--no-check", action="store_true", help="skip the co-simulation runs at 0.99 and 1.01 times the gap")
+    p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
+    p.add_argument("--out", type=Path, help="result folder (default: out/<scene>_separation)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plot")
 
     p = add("export-ssp", cmd_export_ssp, "write a scene as an SSP 1.0 package (FMUs included)")
     p.add_argument("scene", help="scene file or bundled scene name")
