@@ -27,6 +27,7 @@ package a per-user cache, ``$XDG_CACHE_HOME/pounding-cosim/fmus/<version>-<hash>
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 import os
 import shutil
@@ -84,6 +85,28 @@ def fmu_spec(name: str) -> FmuSpec:
 
 
 # -- what goes into an FMU ---------------------------------------------------------------------------
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's bytes: what summaries and studies record of the FMUs and records
+    a run used.  Kept per (path, size, modification time): a study hashes each FMU once."""
+    path = Path(path)
+    stat = path.stat()
+    return _sha256(str(path.absolute()), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _sha256(path: str, size: int, mtime_ns: int) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def fmu_hashes(fmu_dir: str | Path, names: Sequence[str] = FMU_NAMES) -> dict[str, str]:
+    """``{name: SHA-256 of <fmu_dir>/<name>.fmu}``."""
+    return {n: file_sha256(Path(fmu_dir) / f"{n}.fmu") for n in names}
+
+
 def _relative_imports(path: Path) -> list[str]:
     """Modules of the same package that ``path`` imports (``from .x import ...``)."""
     names = []

@@ -18,7 +18,10 @@ from .results import SimulationResult, Summary, energy_history, impact_times, su
 def format_summary(summary: Summary) -> str:
     """A short human-readable block for the terminal."""
     s, cost = summary, summary.cost
-    lines = [f"scene {s.scene}: {s.description}".rstrip(": "),
+    lines = [f"scene {s.scene}: {s.system or s.description}".rstrip(": ")]
+    if s.overrides:
+        lines.append(f"  overrides: {', '.join(s.overrides)}")
+    lines += [
              f"  {s.coupling}, h = {s.step_s:g} s, t = 0..{s.stop_time_s:g} s, "
              f"{cost.communication_steps} steps, {cost.fmu_calls} FMI calls, "
              f"wall time {cost.wall_time_s:.3f} s"]

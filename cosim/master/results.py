@@ -165,6 +165,14 @@ class Summary:
     energy_residual_relative: float
     cost: Cost
     warnings: list[str] = field(default_factory=list)
+    #: what ran, from the effective parameters (:func:`system_description`)
+    system: str = ""
+    #: the overrides applied to the scene file (their text)
+    overrides: list[str] = field(default_factory=list)
+    #: the scene as it ran, in the scene format (:meth:`cosim.master.scene.Scene.as_run`)
+    scene_as_run: dict[str, Any] = field(default_factory=dict)
+    #: package version, FMU and record files with their SHA-256 (:mod:`cosim.master.provenance`)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
     def max_penetration_m(self) -> float:
@@ -185,7 +193,8 @@ class Summary:
     def to_dict(self) -> dict[str, Any]:
         """``summary.json``: the keys and their order as the package has always written them."""
         out: dict[str, Any] = dict(
-            scene=self.scene, description=self.description, coupling=self.coupling, step_s=self.step_s,
+            scene=self.scene, description=self.description, system=self.system, overrides=list(self.overrides),
+            coupling=self.coupling, step_s=self.step_s,
             stop_time_s=self.stop_time_s, instances=list(self.instances), peak_force_N=self.peak_force_N,
             impacts=self.impacts, dissipated_energy_J=self.dissipated_energy_J,
             buildings={name: b.to_dict() for name, b in self.buildings.items()},
@@ -196,6 +205,8 @@ class Summary:
             energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
         out.update(self.cost.to_dict())
         out["warnings"] = list(self.warnings)
+        out["scene_as_run"] = self.scene_as_run
+        out["provenance"] = self.provenance
         return out
 
 
@@ -291,8 +302,9 @@ def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSu
         peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))))
 
 
-def summarize(result: SimulationResult) -> Summary:
-    """The numbers a person wants from a run (SI units in the names)."""
+def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = None) -> Summary:
+    """The numbers a person wants from a run (SI units in the names).  ``provenance``: what the run
+    was made with (:func:`cosim.master.provenance.provenance`), kept as it is."""
     scene = result.scene
     contacts = {c.name: _contact_summary(result, c.name) for c in scene.contacts}
     buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name)) for b in scene.buildings}
@@ -310,7 +322,42 @@ def summarize(result: SimulationResult) -> Summary:
         energy_strain_J=float(e["strain"][-1]), energy_damping_J=float(e["damping"][-1]),
         energy_contact_J=float(e["contact"][-1]), energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
-        cost=result.cost, warnings=sampling_warnings(contacts))
+        cost=result.cost, warnings=sampling_warnings(contacts),
+        system=system_description(scene, _final(result, column(scene.ground.name, "pga")) if scene.ground else None),
+        overrides=list(scene.overrides), scene_as_run=scene.as_run(), provenance=dict(provenance or {}))
+
+
+def system_description(scene: "Scene", pga: float | None = None) -> str:
+    """One line saying what runs, from the effective parameters (never the scene file's
+    description, which an override can make wrong): buildings and their fundamental periods,
+    the contact levels, gap and law, the record and its PGA (m/s^2, when known)."""
+    from fmu_src.ground_records import G
+
+    from .models import shear_building
+
+    parts = []
+    for b in scene.buildings:
+        n = int(b.value("n_storeys"))
+        parts.append(f"{b.name} {n}-storey (T1 = {float(shear_building(b).periods[0]):.3g} s)")
+    text = " and ".join(parts) if len(parts) <= 2 else ", ".join(parts)
+    if scene.contacts:
+        def law(c):
+            return f"gap {float(c.value('gap')):g} m, {c.value('model')} CR {float(c.value('CR')):g}"
+        laws = {law(c) for c in scene.contacts}
+        pairs = [(lv.floor_left, lv.floor_right) for lv in scene.levels]
+        floors = sorted({f for f, g in pairs if f == g})
+        if len(floors) == len(pairs) and len(floors) > 2 and floors == list(range(floors[0], floors[-1] + 1)):
+            where = f"floors {floors[0]}-{floors[-1]}"
+        else:
+            where = "floor " + ", ".join(str(f) if f == g else f"{f}/{g}" for f, g in pairs)
+        text += f"; pounding at {where}: " + ("; ".join(sorted(laws)) if len(laws) > 1 else laws.pop())
+    if scene.ground is not None:
+        record = str(scene.ground.value("record"))
+        label = record if len(record) <= 40 else "..." + record[-37:]
+        text += f"; under {label}" + (f" (PGA {pga / G:.3g} g)" if pga else "")
+    else:
+        text += "; free vibration"
+    return text
 
 
 #: plain-law step / impact time scale above which a run's summary warns (energy error ~ ratio)

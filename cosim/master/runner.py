@@ -18,6 +18,7 @@ from typing import Any, Mapping, Sequence
 from ..fmus import default_fmu_dir
 from .loader import load_scene
 from .output import write_results
+from .provenance import provenance
 from .results import RunResult, summarize
 from .scene import Override
 from .simulate import simulate
@@ -61,10 +62,11 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
         loaded = load_scene(scene, list(overrides) + settings(coupling, step, stop_time), catalog)
         with System(loaded, catalog) as system:
             result = simulate(system, progress=progress, **strategy_options)
+        made_with = provenance(loaded, catalog)
     finally:
         if own_catalog:
             catalog.close()
-    summary = summarize(result)
+    summary = summarize(result, made_with)
     folder = None
     if write:
         folder = write_results(result, Path(out) if out else Path("out") / loaded.name, plots=plots,

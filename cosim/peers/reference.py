@@ -68,12 +68,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
-from fmu_src.contact_laws import law_for
-from fmu_src.ground_records import record_from_parameters
-from fmu_src.shear_building import ShearBuilding
-
-from ..master.interface import parameter_defaults
-from ..master.names import element_name
+from ..master.models import contact_law, ground_record, initial_state, shear_building
 
 OPEN, APPROACH, RESTITUTION = "open", "approach", "restitution"
 METHODS = ("DOP853", "Radau", "RK45", "BDF", "LSODA")
@@ -771,36 +766,19 @@ def scene_inputs(scene) -> dict:
     """Plain arguments of :func:`solve_reference` for a scene, with the FMUs' physics.
 
     Builds the same objects the slaves build in ``initialize()`` from the same parameter
-    values (the scene's, else the FMU's defaults: :meth:`cosim.master.scene.InstanceSpec.value`):
-    ``ShearBuilding`` (``from_period`` when ``T1 > 0``), ``record_from_parameters`` and ``law_for``.
-    Contacts keep the scene's order.
+    values (:mod:`cosim.master.models`).  Contacts keep the scene's order.
     """
     buildings, x0, v0 = [], [], []
     for spec in scene.buildings:
-        n = int(spec.value("n_storeys"))
-        floors = range(1, n + 1)
-        masses = [float(spec.value(element_name("m", i))) for i in floors]
-        stiffnesses = [float(spec.value(element_name("k", i))) for i in floors]
-        T1, zeta, damping = float(spec.value("T1")), float(spec.value("zeta")), spec.value("damping")
-        if T1 > 0.0:
-            building = ShearBuilding.from_period(T1, masses, stiffnesses, zeta, damping)
-        else:
-            building = ShearBuilding(masses, stiffnesses, zeta, damping)
-        buildings.append(building)
-        x0.append(np.array([float(spec.value(element_name("x0", i))) for i in floors]))
-        v0.append(np.array([float(spec.value(element_name("v0", i))) for i in floors]))
-
-    ground = None
-    if scene.ground is not None:
-        ground = record_from_parameters({**parameter_defaults(scene.ground.fmu), **scene.ground.parameters})
-
+        buildings.append(shear_building(spec))
+        x, v = initial_state(spec)
+        x0.append(x)
+        v0.append(v)
+    ground = ground_record(scene.ground) if scene.ground is not None else None
     contacts = []
     index = {spec.name: b for b, spec in enumerate(scene.buildings)}
     for level, spec in zip(scene.levels, scene.contacts):
-        p = spec.value
-        law = law_for(p("model"), float(p("k")), float(p("n")), float(p("m1")), float(p("m2")),
-                      float(p("CR")), float(p("zeta")))
         contacts.append(Contact(index[level.left], int(level.floor_left), index[level.right],
-                                int(level.floor_right), law, float(p("gap"))))
+                                int(level.floor_right), contact_law(spec), float(spec.value("gap"))))
     return dict(buildings=buildings, ground=ground, contacts=contacts, stop_time=float(scene.stop_time),
                 x0=x0, v0=v0)

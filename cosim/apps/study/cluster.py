@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from ...fmus import FMU_NAMES, default_fmu_dir
+from ...fmus import default_fmu_dir, fmu_hashes
 from ...master.scene import Override
 from ...master.system import Catalog
 from .cases import Case
@@ -24,10 +24,6 @@ from .runner import CaseRunner, validate_study
 from .spec import Study, StudyError, load_study
 
 CONNECT_TIMEOUT_S = 5.0           # an unreachable scheduler is reported after this long
-
-
-def fmu_hashes(fmu_dir: Path) -> dict[str, str]:
-    return {n: hashlib.sha256((fmu_dir / f"{n}.fmu").read_bytes()).hexdigest() for n in FMU_NAMES}
 
 
 class StudyPlugin(WorkerPlugin):
