@@ -85,7 +85,7 @@ def cmd_run(args) -> int:
 
     run = run_scene(args.scene, _overrides(args.overrides), out=args.out, coupling=args.coupling, step=args.step,
                     stop_time=args.stop_time, fmu_dir=args.fmu_dir, plots=not args.no_plots,
-                    progress=False if args.no_progress else None)
+                    progress=False if args.no_progress else None, parquet=args.parquet)
     print(format_summary(run.summary))
     print(f"results: {run.folder}")
     return EXIT_OK
@@ -322,6 +322,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     _scene_options(p)
     p.add_argument("--out", type=Path, help="result folder (default: out/<scene name>)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--parquet", action="store_true",
+                   help="also write history.parquet (units and descriptions in the column metadata)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.add_argument("--list", action="store_true", help="list the bundled scenes and exit")
     p.add_argument("--accuracy", action="store_true",

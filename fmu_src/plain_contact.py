@@ -17,14 +17,21 @@ class PlainContact:
     work minus the energy stored in the spring.
     """
 
-    def __init__(self, law: ContactLaw):
+    def __init__(self, law: ContactLaw, graze_depth: float = 0.0):
         self.law = law
+        self.graze_depth = graze_depth   # m: a contact shallower than this is a graze, not an impact
         self.in_contact = False
         self.v_imp = 0.0
         self.F = 0.0                # N, force applied over the current step
         self.delta_prev = 0.0
         self.work = 0.0             # J, work done on the contact so far
-        self.impacts = 0
+        self.impacts = 0            # contacts that reached graze_depth (counted when they do)
+        self.grazes = 0             # completed contacts that never reached graze_depth
+        self.started = 0            # contacts begun
+        self.ended = 0              # contacts completed
+        self.counted = False
+        self.onset_offset = 0.0     # s: a contact is found at the start of a step
+        self.impact_peak = 0.0      # N, largest force of the current/latest contact
         self.F_max = 0.0
         self.delta_max = 0.0
         self.impact_time = 0.0
@@ -42,17 +49,26 @@ class PlainContact:
         if delta > 0.0:
             if not self.in_contact:
                 self.in_contact = True
-                self.impacts += 1
+                self.started += 1
+                self.counted = False
                 self.v_imp = abs(delta_dot)
                 self.delta_max = 0.0
                 self.impact_time = 0.0
+                self.impact_peak = 0.0
                 self._E_at_onset = self.dissipated_energy()
             self.delta_max = max(self.delta_max, delta)
+            if not self.counted and self.delta_max >= self.graze_depth:
+                self.counted = True
+                self.impacts += 1
             self.impact_time += h
             self.F = self.law.force(delta, delta_dot, self.v_imp)
+            self.impact_peak = max(self.impact_peak, self.F)
         else:
             if self.in_contact:
                 self.in_contact = False
+                self.ended += 1
+                if not self.counted:
+                    self.grazes += 1
                 self.last_CR = max(0.0, -delta_dot) / self.v_imp if self.v_imp > 0.0 else math.nan
                 self.last_E = self.dissipated_energy() - self._E_at_onset
             self.F = 0.0

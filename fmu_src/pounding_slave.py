@@ -52,6 +52,10 @@ class Pounding(Fmi2Slave):
         Variable("resolve_impacts", type="Boolean", start=True,
                  description="true: locate and integrate impacts inside each step; false: force law on the "
                              "current inputs only"),
+        Variable("graze_depth", start=0.0, unit="m", low=0.0,
+                 description="a contact whose penetration stays below this is a graze: counted in grazes, not in "
+                             "impacts (0: every contact is an impact; building scenes use 3e-4, three times the "
+                             "co-simulation's resolution of the relative floor position, docs/contact_models.md)"),
         # inputs
         Variable("x1", causality="input", start=0.0, unit="m", description="displacement of body 1"),
         Variable("v1", causality="input", start=0.0, unit="m/s", description="velocity of body 1"),
@@ -73,7 +77,16 @@ class Pounding(Fmi2Slave):
         Variable("E_dissipated", start=0.0, unit="J", **_OUT,
                  description="energy dissipated by all impacts so far (the current one up to now)"),
         Variable("impacts", type="Integer", start=0, **_OUT,
-                 description="number of impacts begun so far"),
+                 description="number of impacts so far: contacts whose penetration reached graze_depth "
+                             "(counted when it does)"),
+        Variable("grazes", type="Integer", start=0, **_OUT,
+                 description="number of completed contacts whose penetration stayed below graze_depth"),
+        Variable("contacts_ended", type="Integer", start=0, **_OUT,
+                 description="number of completed contacts, impacts and grazes (one more at each separation)"),
+        Variable("t_onset", start=0.0, unit="s", **_OUT,
+                 description="time at which the latest contact began"),
+        Variable("F_peak", start=0.0, unit="N", **_OUT,
+                 description="largest instantaneous force of the latest contact (so far, while in progress)"),
         Variable("v_impact", start=0.0, unit="m/s", **_OUT,
                  description="approach speed of the latest impact (latched at contact onset)"),
         Variable("CR_achieved", start=0.0, unit="1", **_OUT,
@@ -101,12 +114,15 @@ class Pounding(Fmi2Slave):
     def initialize(self) -> None:
         law = law_for(self.model, self.k, self.n, self.m1, self.m2, self.CR, self.zeta)
         self.zeta_used = law.zeta
-        self._contact = ImpactResolver(law) if self.resolve_impacts else PlainContact(law)
+        depth = float(self.graze_depth)
+        self._contact = (ImpactResolver(law, graze_depth=depth) if self.resolve_impacts
+                         else PlainContact(law, graze_depth=depth))
 
     def step(self, current_time: float, step_size: float) -> None:
         delta = self.x1 - self.x2 - self.gap
         delta_dot = self.v1 - self.v2
         c = self._contact
+        started = c.started
         if self.resolve_impacts:
             out = c.step(delta, delta_dot, step_size)
             self.F = out.mean_force
@@ -126,6 +142,11 @@ class Pounding(Fmi2Slave):
         self.F_max = c.F_max
         self.E_dissipated = c.dissipated_energy()
         self.impacts = c.impacts
+        self.grazes = c.grazes
+        self.contacts_ended = c.ended
+        if c.started != started:
+            self.t_onset = current_time + c.onset_offset
+        self.F_peak = c.impact_peak
         self.v_impact = c.v_imp
         self.delta_max = c.delta_max
         self.contact_time = c.impact_time

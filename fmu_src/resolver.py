@@ -100,8 +100,9 @@ class ImpactResolver:
     """
 
     def __init__(self, law: ContactLaw, rtol: float = 1e-8, follow_host: bool = True,
-                 extrapolate: bool = True):
+                 extrapolate: bool = True, graze_depth: float = 0.0):
         self.law = law
+        self.graze_depth = graze_depth   # m: a contact shallower than this is a graze, not an impact
         self.rtol = rtol
         self.follow_host = follow_host
         self.extrapolate = extrapolate
@@ -130,7 +131,12 @@ class ImpactResolver:
         self.held_late = False      # the host holds the force one step late (Jacobi): rule 1
         self.held_known = False     # held_late decided on clear evidence (then final)
         self.correction = (0.0, 0.0)  # (m, m/s) last correction applied to the internal state
-        self.impacts = 0
+        self.impacts = 0            # contacts that reached graze_depth (counted when they do)
+        self.grazes = 0             # completed contacts that never reached graze_depth
+        self.started = 0            # contacts begun
+        self.ended = 0              # contacts completed (impacts and grazes)
+        self.counted = False        # the current/latest contact is counted as an impact
+        self.onset_offset = 0.0     # s into its step at which the latest contact began
         self.E_completed = 0.0      # J, all completed impacts
         self.F_max = 0.0            # N
         self.impact_peak = 0.0      # N, current/latest impact
@@ -236,6 +242,7 @@ class ImpactResolver:
             v_on = v0 + self._ext_rate(t, s)
             t += s
             self._start(v_on)
+            self.onset_offset = t
             out.impacts_started += 1
         # the force law is compressive; a quadrature of a force that fades to zero at
         # separation can sum to -1e-29 N s, which must not reach the host as tension
@@ -299,18 +306,31 @@ class ImpactResolver:
         self.approaching = True
         self.v_imp = max(v, MIN_IMPACT_SPEED)
         self.d, self.u, self.e, self.e_top = 0.0, 1.0, 0.0, 0.0
-        self.impacts += 1
+        self.started += 1
+        self.counted = False
         self.impact_peak = 0.0
         self.impact_time = 0.0
         self.delta_max = 0.0
         self._prev = ()
         self.dtau = 1e-3
+        self._count_if_deep()
+
+    def _count_if_deep(self) -> None:
+        """Count the current contact as an impact once its penetration reaches ``graze_depth``
+        (at once when that is 0)."""
+        if not self.counted and self.delta_max >= self.graze_depth:
+            self.counted = True
+            self.impacts += 1
 
     def _finish(self, d: float, u: float, L: float, v: float) -> None:
         """Book a completed impact that separated at scaled (d, u)."""
         n, m = self.law.n, self.law.m
         # a force separation with d > 0 leaves the spring energy of the overlap behind: lost
         e = max(self.e_top, self.e) + (d ** (n + 1.0) / (n + 1.0) if d > 0.0 else 0.0)
+        self._count_if_deep()
+        if not self.counted:
+            self.grazes += 1
+        self.ended += 1
         self.in_contact = False
         self.just_separated = True
         self.last_CR = max(0.0, -u)
@@ -426,6 +446,7 @@ class ImpactResolver:
         self.delta_end = d * L
         self.delta_dot_end = u * v
         self.delta_max = max(self.delta_max, d * L)
+        self._count_if_deep()
         return h
 
     def _dissipated(self, d, u, d1, u1, al, al1, hs) -> float:
@@ -448,6 +469,7 @@ class ImpactResolver:
     def _switch_to_restitution(self, d: float, u: float, L: float) -> None:
         self.approaching = False
         self.delta_max = max(self.delta_max, d * L)
+        self._count_if_deep()
 
     def _event_function(self, event: str):
         if event == "max_penetration":

@@ -5,6 +5,7 @@ Folders are written completely under a temporary sibling name and renamed at the
 """
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -12,7 +13,8 @@ import numpy as np
 
 from ..files import replaced_folder
 from .names import column, element_name
-from .results import SimulationResult, Summary, energy_history, impact_times, summarize
+from .results import (IMPACT_COLUMNS, SimulationResult, Summary, energy_history, impact_table, impact_times,
+                      summarize)
 
 
 def format_summary(summary: Summary) -> str:
@@ -30,7 +32,9 @@ def format_summary(summary: Summary) -> str:
                      f"{b.peak_displacement_floor}), peak drift {b.peak_drift_m:.4g} m "
                      f"(storey {b.peak_drift_storey})")
     if s.contacts:
-        lines.append(f"  pounding: {s.impacts} impacts, peak force {s.peak_force_N:.4g} N, "
+        grazes = f" (and {s.grazes} graze{'s' if s.grazes != 1 else ''}: contacts shallower than graze_depth)" \
+            if s.grazes else ""
+        lines.append(f"  pounding: {s.impacts} impacts{grazes}, peak force {s.peak_force_N:.4g} N, "
                      f"dissipated {s.dissipated_energy_J:.4g} J")
     else:
         lines.append("  no contact element")
@@ -49,9 +53,60 @@ def write_history(result: SimulationResult, path: Path) -> None:
     np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
 
 
+def history_units(result: SimulationResult) -> list[tuple[str, str, str, str]]:
+    """``(column, unit, description, type)`` of every history column, from the FMUs' model
+    descriptions (``time`` in s first; a unitless ratio has unit ``1``, a count or flag none)."""
+    scene = result.scene
+    interfaces = scene.interfaces or {}
+    fmu_of = {spec.name: spec.fmu for spec in scene.instances()}
+    out = [("time", "s", "time of the communication point", "Real")]
+    for name in result.columns:
+        instance, variable = name.split(".", 1)
+        interface = interfaces.get(fmu_of.get(instance))
+        info = interface.variables.get(variable) if interface is not None else None
+        out.append((name, (info.unit or "") if info else "", (info.description or "") if info else "",
+                    info.type if info else "Real"))
+    return out
+
+
+def write_history_units(result: SimulationResult, path: Path) -> None:
+    """``history_units.csv``: one row per column of ``history.csv``: ``column,unit,description``."""
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(["column", "unit", "description"])
+        writer.writerows(row[:3] for row in history_units(result))
+
+
+def write_history_parquet(result: SimulationResult, path: Path) -> None:
+    """``history.parquet``: the history's columns (Real as float64, Integer and Boolean as int32)
+    with each column's unit and description in its field metadata, the scene in the table's."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    arrays = [result.time] + [result.values[:, j] for j in range(len(result.columns))]
+    fields, columns = [], []
+    for (name, unit, description, kind), values in zip(history_units(result), arrays):
+        array = pa.array(values.astype(np.float64) if kind == "Real" else values.astype(np.int32))
+        fields.append(pa.field(name, array.type, metadata={"unit": unit, "description": description}))
+        columns.append(array)
+    table = pa.Table.from_arrays(columns, schema=pa.schema(fields, metadata={"scene": result.scene.name}))
+    pq.write_table(table, path)
+
+
+def write_impacts(result: SimulationResult, path: Path) -> None:
+    """``impacts.csv``: :func:`~cosim.master.results.impact_table`, units in the column names."""
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow([name for name, _ in IMPACT_COLUMNS])
+        for row in impact_table(result):
+            writer.writerow([row[name] if isinstance(row[name], str) else f"{row[name]:.10g}"
+                             for name, _ in IMPACT_COLUMNS])
+
+
 def write_results(result: SimulationResult, folder: str | Path, plots: bool = True,
-                  summary: Summary | None = None) -> Path:
-    """Write ``history.csv``, ``summary.json`` and the plots into ``folder``.
+                  summary: Summary | None = None, parquet: bool = False) -> Path:
+    """Write ``history.csv`` (with ``history_units.csv``), ``impacts.csv``, ``summary.json`` and the
+    plots (``parquet``: also ``history.parquet``) into ``folder``.
 
     Everything goes to a temporary sibling first, renamed at the end; an
     existing ``folder`` is replaced only once the new one is complete.
@@ -59,6 +114,11 @@ def write_results(result: SimulationResult, folder: str | Path, plots: bool = Tr
     with replaced_folder(folder) as tmp:
         summary = summary or summarize(result)
         write_history(result, tmp / "history.csv")
+        write_history_units(result, tmp / "history_units.csv")
+        if parquet:
+            write_history_parquet(result, tmp / "history.parquet")
+        if result.scene.contacts:
+            write_impacts(result, tmp / "impacts.csv")
         (tmp / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
         if plots:
             plot_all(result, tmp)

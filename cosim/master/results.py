@@ -110,9 +110,12 @@ class ContactSummary:
     step_over_time_scale: float | None = None
     #: the largest latched approach speed (m/s); not a key of summary.json
     peak_impact_velocity_m_s: float = 0.0
+    #: contacts shallower than the contact's graze_depth (not impacts)
+    grazes: int = 0
 
     def to_dict(self) -> dict[str, Any]:
-        out = dict(impacts=self.impacts, peak_force_N=self.peak_force_N, peak_mean_force_N=self.peak_mean_force_N,
+        out = dict(impacts=self.impacts, grazes=self.grazes, peak_force_N=self.peak_force_N,
+                   peak_mean_force_N=self.peak_mean_force_N,
                    dissipated_energy_J=self.dissipated_energy_J, max_penetration_m=self.max_penetration_m,
                    first_impact_s=self.first_impact_s)
         if self.step_over_time_scale is not None:
@@ -175,6 +178,11 @@ class Summary:
     provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def grazes(self) -> int:
+        """Contacts of every level shallower than their graze_depth (not counted as impacts)."""
+        return sum(c.grazes for c in self.contacts.values())
+
+    @property
     def max_penetration_m(self) -> float:
         """Deepest penetration of any contact (m)."""
         return max([c.max_penetration_m for c in self.contacts.values()], default=0.0)
@@ -196,7 +204,7 @@ class Summary:
             scene=self.scene, description=self.description, system=self.system, overrides=list(self.overrides),
             coupling=self.coupling, step_s=self.step_s,
             stop_time_s=self.stop_time_s, instances=list(self.instances), peak_force_N=self.peak_force_N,
-            impacts=self.impacts, dissipated_energy_J=self.dissipated_energy_J,
+            impacts=self.impacts, grazes=self.grazes, dissipated_energy_J=self.dissipated_energy_J,
             buildings={name: b.to_dict() for name, b in self.buildings.items()},
             contacts={name: c.to_dict() for name, c in self.contacts.items()},
             energy_initial_J=self.energy_initial_J, energy_input_J=self.energy_input_J,
@@ -237,6 +245,20 @@ def impact_times(result: SimulationResult, contact: str) -> np.ndarray:
     return result.time[new]
 
 
+def first_impact_time(result: SimulationResult, contact: str) -> float | None:
+    """Onset time (s) of ``contact``'s first impact: the contact FMU's ``t_onset`` where its impact
+    counter first rises (it counts an impact once the penetration reaches graze_depth, after
+    the onset), else the start of that step; None without impacts."""
+    counts = result[column(contact, "impacts")]
+    new = np.flatnonzero(np.diff(counts) > 0)
+    if not new.size:
+        return None
+    k = int(new[0]) + 1
+    if result.has(column(contact, "t_onset")):
+        return float(result[column(contact, "t_onset")][k])
+    return float(result.time[k - 1])
+
+
 def impact_onsets(result: SimulationResult) -> list[float]:
     """Start times (s) of the communication steps in which any contact counted a new impact,
     sorted (the resolved contact's onset lies in that step; the plain law's in the step before)."""
@@ -246,6 +268,57 @@ def impact_onsets(result: SimulationResult) -> list[float]:
         new = np.flatnonzero(np.diff(counts) > 0)
         times.extend(float(t) for t in result.time[new])
     return sorted(times)
+
+
+#: the columns of ``impacts.csv``, with their units
+IMPACT_COLUMNS = (("contact", ""), ("kind", ""), ("t_onset_s", "s"), ("approach_speed_m_s", "m/s"),
+                  ("peak_force_N", "N"), ("max_penetration_m", "m"), ("duration_s", "s"),
+                  ("dissipated_energy_J", "J"), ("CR_achieved", "1"))
+
+
+def impact_table(result: SimulationResult) -> list[dict[str, Any]]:
+    """One row per contact of every contact instance, sorted by onset: ``kind`` is ``impact``,
+    ``graze`` (shallower than graze_depth) or ``in progress`` (not ended at the end of the run).
+
+    Read from the contact FMU's outputs at the end of the step in which the contact ended
+    (``contacts_ended`` rises; ``grazes`` rises with it for a graze): onset time, approach speed,
+    peak force, largest penetration, duration, dissipated energy and achieved CR of that contact.
+    Two contacts ending in one communication step (a fixed step longer than a bounce) leave the
+    details of the last only: the others get a row of kind ``impact (not detailed)`` with its
+    step's end time and no numbers.
+    """
+    rows: list[dict[str, Any]] = []
+    nan = float("nan")
+    for c in result.scene.contacts:
+        name = c.name
+        if not result.has(column(name, "contacts_ended")):
+            continue
+
+        def at(variable, k):
+            return float(result[column(name, variable)][k])
+
+        ended = result[column(name, "contacts_ended")]
+        grazes = result[column(name, "grazes")]
+        for k in np.flatnonzero(np.diff(ended) > 0) + 1:
+            count = int(ended[k] - ended[k - 1])
+            grazed = int(grazes[k] - grazes[k - 1])
+            for _ in range(count - 1):   # ended inside the same step as the detailed one
+                rows.append(dict(contact=name, kind="impact (not detailed)", t_onset_s=float(result.time[k]),
+                                 approach_speed_m_s=nan, peak_force_N=nan, max_penetration_m=nan, duration_s=nan,
+                                 dissipated_energy_J=nan, CR_achieved=nan))
+            rows.append(dict(contact=name, kind="graze" if grazed and count == 1 else "impact",
+                             t_onset_s=at("t_onset", k), approach_speed_m_s=at("v_impact", k),
+                             peak_force_N=at("F_peak", k), max_penetration_m=at("delta_max", k),
+                             duration_s=at("contact_time", k), dissipated_energy_J=at("E_last", k),
+                             CR_achieved=at("CR_achieved", k)))
+        k = result.time.size - 1
+        if result.has(column(name, "in_contact")) and result[column(name, "in_contact")][k]:
+            rows.append(dict(contact=name, kind="in progress", t_onset_s=at("t_onset", k),
+                             approach_speed_m_s=at("v_impact", k), peak_force_N=at("F_peak", k),
+                             max_penetration_m=at("delta_max", k), duration_s=at("contact_time", k),
+                             dissipated_energy_J=nan, CR_achieved=nan))
+    rows.sort(key=lambda r: r["t_onset_s"])
+    return rows
 
 
 def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
@@ -275,7 +348,6 @@ def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
 def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
     fmax = result[column(name, "F_max")] if result.has(column(name, "F_max")) else result[column(name, "F")]
     delta = result[column(name, "delta")] if result.has(column(name, "delta")) else np.zeros(1)
-    times = impact_times(result, name)
     ratio = result.stats.get("step_over_time_scale", {}).get(name)
     v_impact = (float(np.max(np.abs(result[column(name, "v_impact")])))
                 if result.has(column(name, "v_impact")) else 0.0)
@@ -285,7 +357,8 @@ def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
         peak_mean_force_N=float(np.max(result[column(name, "F")])),
         dissipated_energy_J=_final(result, column(name, "E_dissipated")),
         max_penetration_m=float(max(0.0, np.max(delta))),
-        first_impact_s=float(times[0]) if times.size else None,
+        first_impact_s=first_impact_time(result, name),
+        grazes=int(_final(result, column(name, "grazes"))),
         # plain force law: how finely the master sampled its impacts
         step_over_time_scale=float(ratio) if ratio is not None else None,
         peak_impact_velocity_m_s=v_impact)

@@ -44,7 +44,7 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
               out: str | Path | None = None, coupling: str | None = None, step: float | None = None,
               stop_time: float | None = None, fmu_dir: str | Path | None = None,
               catalog: Catalog | None = None, write: bool = True, plots: bool = True,
-              progress: bool | None = None, **strategy_options: Any) -> RunResult:
+              progress: bool | None = None, parquet: bool = False, **strategy_options: Any) -> RunResult:
     """Load, validate and run a scene; write its results unless ``write=False``.
 
     ``overrides``: :class:`~cosim.master.scene.Override` objects (or their text form,
@@ -53,7 +53,8 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
     :class:`~cosim.master.scene.SceneError` (invalid scene or override) or
     :class:`~cosim.master.fmi.FMUError` (an FMU refused a parameter or a step) before
     anything is written, :class:`~cosim.master.guard.InstabilityError` when the stability
-    guard stops the run.  ``catalog`` reuses already loaded FMUs.
+    guard stops the run.  ``catalog`` reuses already loaded FMUs; ``parquet`` also writes
+    ``history.parquet``.
     """
     own_catalog = catalog is None
     if own_catalog:
@@ -70,5 +71,5 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
     folder = None
     if write:
         folder = write_results(result, Path(out) if out else Path("out") / loaded.name, plots=plots,
-                               summary=summary)
+                               summary=summary, parquet=parquet)
     return RunResult(loaded, result, summary, folder)

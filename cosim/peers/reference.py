@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -89,6 +89,9 @@ class Contact:
         Force law (``fmu_src.contact_laws.law_for(...)``): ``force(delta, delta_dot, v_imp)``.
     gap : float
         Initial clear distance (m), >= 0: ``delta = x_left - x_right - gap``.
+    graze_depth : float
+        A contact whose largest penetration stays below this (m) is a graze, not an impact
+        (``pounding.fmu``'s parameter of that name); 0: every contact is an impact.
     """
 
     left: int
@@ -97,6 +100,7 @@ class Contact:
     right_floor: int
     law: object
     gap: float = 0.0
+    graze_depth: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -119,6 +123,8 @@ class Impact:
     dissipated_energy_J : float
         Work done on the contact over the impact (J); for an impact still open at the end,
         that work minus the elastic energy ``k delta^(n+1) / (n+1)`` still stored.
+    grazing : bool
+        Its largest penetration stayed below the contact's ``graze_depth``: a graze, not an impact.
     """
 
     contact: int
@@ -128,6 +134,7 @@ class Impact:
     max_penetration: float = 0.0
     t_separation: float = math.nan
     dissipated_energy_J: float = 0.0
+    grazing: bool = False
 
     @property
     def duration(self) -> float:
@@ -186,10 +193,17 @@ class ReferenceResult:
     wall_time_s: float
     event_counts: dict = field(default_factory=dict)   # located events by kind
 
+    graze_list: tuple[Impact, ...] = ()                # contacts shallower than their graze_depth
+
     @property
     def impacts(self) -> int:
-        """Number of impacts (onsets) over all contacts."""
+        """Number of impacts over all contacts (grazes not counted: ``graze_list``)."""
         return len(self.impact_list)
+
+    @property
+    def grazes(self) -> int:
+        """Number of grazes: contacts whose penetration stayed below their contact's graze_depth."""
+        return len(self.graze_list)
 
     @property
     def energy_residual(self) -> float:
@@ -605,6 +619,8 @@ class _Integration:
             work = float(self.y_end[2 * n + 2 + c]) - rec.pop("work0")
             impacts.append(_close_impact(rec, math.nan, work - stored_end[c]))
         impacts.sort(key=lambda imp: imp.t_onset)
+        impacts = [replace(imp, grazing=imp.max_penetration < system.contacts[imp.contact].graze_depth)
+                   for imp in impacts]
 
         # histories on the output grid (phases re-derived from the impact list)
         u_out, v_out = y_out[:, :n], y_out[:, n:2 * n]
@@ -619,7 +635,8 @@ class _Integration:
         peak_u = self.peaks.refined()
         return ReferenceResult(
             t=t_output, u=u_out, v=v_out, contact_force=forces, penetration=deltas, energies=energies,
-            impact_list=tuple(impacts),
+            impact_list=tuple(imp for imp in impacts if not imp.grazing),
+            graze_list=tuple(imp for imp in impacts if imp.grazing),
             peak_force_N=max((imp.peak_force_N for imp in impacts), default=0.0),
             dissipated_energy_J=float(sum(imp.dissipated_energy_J for imp in impacts)),
             peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(system.offsets[:-1], system.offsets[1:])),
@@ -779,6 +796,7 @@ def scene_inputs(scene) -> dict:
     index = {spec.name: b for b, spec in enumerate(scene.buildings)}
     for level, spec in zip(scene.levels, scene.contacts):
         contacts.append(Contact(index[level.left], int(level.floor_left), index[level.right],
-                                int(level.floor_right), contact_law(spec), float(spec.value("gap"))))
+                                int(level.floor_right), contact_law(spec), float(spec.value("gap")),
+                                float(spec.value("graze_depth"))))
     return dict(buildings=buildings, ground=ground, contacts=contacts, stop_time=float(scene.stop_time),
                 x0=x0, v0=v0)
