@@ -66,7 +66,7 @@ class FmuSpec:
 
 FMUS = (
     FmuSpec(POUNDING, "pounding_slave", "Pounding", "contact", "contact element: spring + dashpot impact laws"),
-    FmuSpec(BUILDING, "building_slave", "Building", "building", "linear shear building, 1 to 20 storeys"),
+    FmuSpec(BUILDING, "building_slave", "Building", "building", "shear building, 1 to 20 storeys, linear or yielding storeys"),
     FmuSpec(GROUND, "ground_motion_slave", "GroundMotion", "ground", "plays a recorded ground acceleration",
             data=("records",)),
 )

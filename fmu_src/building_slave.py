@@ -1,4 +1,4 @@
-"""building.fmu: a linear shear building integrated exactly for zero-order-hold inputs.
+"""building.fmu: a shear building with linear, bilinear or Bouc-Wen storeys.
 
 Storey count: the FMU has a fixed capacity of ``N_MAX = 20`` storeys (FMI 2.0 has no
 variable-size arrays, so every ``m[i]``, ``k[i]``, ``x0[i]``, ``v0[i]``, ``F[i]``, ``x[i]``,
@@ -6,20 +6,30 @@ variable-size arrays, so every ``m[i]``, ``k[i]``, ``x0[i]``, ``v0[i]``, ``F[i]`
 are used: elements above ``n_storeys`` are ignored (neither checked nor used) and their
 outputs stay 0.
 
-Physics (``fmu_src/shear_building.py``): ``M u'' + C u' + K u = -M 1 ag + F`` with ``u``
-relative to the ground; ``T1 > 0`` scales the given ``k`` to that fundamental period;
-``damping`` = ``rayleigh`` (modes 1 and min(2, n)) or ``modal``.  A one-storey building with
-``k[1] = 0`` and ``zeta = 0`` is a free mass.
+Physics (``fmu_src/shear_building.py``, ``fmu_src/hysteresis.py``): ``M u'' + C u' + D' V = -M 1
+ag + F`` with ``u`` relative to the ground and ``V`` the storey shears; ``T1 > 0`` scales the
+given ``k`` to that fundamental period; ``damping`` = ``rayleigh`` (modes 1 and min(2, n)) or
+``modal``, always on the initial (elastic) stiffness, also while storeys yield.  A one-storey
+linear building with ``k[1] = 0`` and ``zeta = 0`` is a free mass.  ``hysteresis`` chooses the
+storey law: ``linear`` (``V = k d``), ``bilinear`` (kinematic hardening, yield shear ``Fy[i]``,
+post-yield ratio ``alpha``) or ``bouc_wen`` (``bw_n``, ``bw_beta``, ``bw_gamma``, A = 1).
 
-Each doStep is one matrix-vector product with a matrix precomputed per step size (cached in
-the instance; an adaptive master uses a handful of step sizes), plus the quadratic form of
-the exact damping energy.  Inputs ``ag`` and ``F[i]`` are taken as constant over the step
-(feed the ground FMU's ``ag_mean`` and the contact FMU's impulse-preserving mean ``F``).
-Outputs are at the end of the step; ``a[i]`` is the absolute acceleration with the step's
-inputs.  Energies ``E_input``, ``E_external`` and ``E_damping`` accumulate from the start;
-``E_kinetic`` and ``E_strain`` are instantaneous, so that
-``E_input + E_external + E0 = E_kinetic + E_strain + E_damping`` with ``E0`` the initial
-kinetic + strain energy.
+Inputs: ``F[i]`` is held constant over the step (feed the contact FMU's impulse-preserving
+mean).  The ground acceleration is either ``ag`` held constant over the step (``n_knots =
+0``, the default: feed the ground FMU's ``ag_mean``) or, with ``n_knots >= 2``, the polyline
+through ``(t_knot[k], ag_knot[k])`` which must cover the step ``[t, t+h]`` (feed the ground
+FMU's knots of the same step; ``ag`` is then ignored).
+
+Integration (``fmu_src/building_response.py``): exact for linear and bilinear storeys (the
+linear zero-order-hold step is one matrix-vector product with a matrix cached per step size,
+bit for bit the model of earlier versions; otherwise the modal solution with yield and
+unloading events located inside the step); Bouc-Wen by an embedded Runge-Kutta 8(5,3) method
+with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
+with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
+``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
+``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
+``E_strain`` (the elastic part) are instantaneous, so that ``E_input + E_external + E0 =
+E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kinetic + strain energy.
 """
 from __future__ import annotations
 
@@ -27,19 +37,28 @@ import math
 
 import numpy as np
 
+from .building_response import StepCost, integrator_for
 from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
+from .hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
+from .record_knots import KNOT_CAPACITY
 from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64
 # Default storey stiffness: 1e5 kg * (2 pi / 0.5 s)^2, i.e. the default 1-storey building has T1 = 0.5 s.
 _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
+# Knots must start and end at the step's ends to this fraction of the step (hosts pass the same
+# doubles to every FMU; the margin only absorbs a host that rounds times differently).
+_KNOT_TIME_TOL = 1e-9
+# Outputs computed from the state when read (none of them is needed to advance the state).
+_DERIVED = ("V", "mu", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak")
 
 
 class Building(Fmi2Slave):
-    """Linear shear building, 1 to N_MAX storeys (see module docstring)."""
+    """Shear building, 1 to N_MAX storeys, linear or yielding storeys (see module docstring)."""
 
-    DESCRIPTION = f"Linear shear building (1..{N_MAX} storeys), exact zero-order-hold integration"
+    DESCRIPTION = (f"Shear building (1..{N_MAX} storeys) with linear, bilinear or Bouc-Wen storeys; exact "
+                   f"integration for linear and bilinear storeys, zero- or first-order-hold ground motion")
     DEFAULT_EXPERIMENT = (0.0, 10.0, 0.01)
     VARIABLES = (
         Variable("n_storeys", "Integer", start=1, low=1, high=N_MAX,
@@ -51,37 +70,113 @@ class Building(Fmi2Slave):
                  description="fundamental period the stiffnesses are scaled to; 0 = use k as given"),
         Variable("zeta", start=0.05, low=0.0, high=1.0, high_open=True, description="viscous damping ratio"),
         Variable("damping", "String", start="rayleigh", choices=DAMPING_MODELS,
-                 description="damping model: rayleigh (modes 1 and 2) or modal (every mode)"),
+                 description="damping model: rayleigh (modes 1 and 2) or modal (every mode), "
+                             "on the initial stiffness"),
         *array("x0", N_MAX, start=0.0, unit="m", description="initial floor displacement relative to the ground"),
         *array("v0", N_MAX, start=0.0, unit="m/s", description="initial floor velocity relative to the ground"),
+        Variable("hysteresis", "String", start="linear", choices=HYSTERESIS_MODELS,
+                 description="storey law: linear, bilinear (kinematic hardening) or bouc_wen"),
+        *array("Fy", N_MAX, start=0.0, unit="N", low=0.0,
+               description="storey yield shear (> 0 needed by bilinear and bouc_wen; linear: only for mu)"),
+        Variable("alpha", start=0.05, unit="1", low=0.0, high=1.0, high_open=True,
+                 description="post-yield stiffness / elastic stiffness"),
+        Variable("bw_n", start=2.0, unit="1", low=1.0, high=BOUC_WEN_MAX_N,
+                 description="Bouc-Wen exponent (sharpness of yielding)"),
+        Variable("bw_beta", start=0.5, unit="1",
+                 description="Bouc-Wen beta (A = 1); needs bw_beta + bw_gamma > 0 and bw_beta >= bw_gamma"),
+        Variable("bw_gamma", start=0.5, unit="1",
+                 description="Bouc-Wen gamma; bw_beta + bw_gamma = 1 makes Fy the strength"),
+        *array("storey_height", N_MAX, start=3.0, unit="m", low=0.0, low_open=True,
+               description="storey height (for drift_ratio_peak)"),
         Variable("ag", causality="input", start=0.0, unit="m/s2",
-                 description="ground acceleration, held constant over the step"),
+                 description="ground acceleration, held constant over the step (used when n_knots = 0)"),
         *array("F", N_MAX, causality="input", start=0.0, unit="N",
                description="external force on the floor, + along x, held constant over the step"),
+        Variable("n_knots", "Integer", causality="input", start=0,
+                 description=f"0: ag held over the step; 2..{KNOT_CAPACITY}: ground acceleration linear "
+                             f"between the knots t_knot/ag_knot, which must cover the step"),
+        *array("t_knot", KNOT_CAPACITY, causality="input", start=0.0, unit="s",
+               description="time of a ground-motion knot (first = step start, last = step end)"),
+        *array("ag_knot", KNOT_CAPACITY, causality="input", start=0.0, unit="m/s2",
+               description="ground acceleration at the knot"),
         *array("x", N_MAX, causality="output", unit="m", description="floor displacement relative to the ground"),
         *array("v", N_MAX, causality="output", unit="m/s", description="floor velocity relative to the ground"),
         *array("a", N_MAX, causality="output", unit="m/s2", description="absolute floor acceleration"),
         *array("drift", N_MAX, causality="output", unit="m", description="inter-storey drift x[i] - x[i-1]"),
-        Variable("base_shear", causality="output", unit="N", description="elastic shear of storey 1, k[1] x[1]"),
+        *array("V", N_MAX, causality="output", unit="N", description="storey shear (restoring, without damping)"),
+        Variable("base_shear", causality="output", unit="N", description="storey shear of storey 1, V[1]"),
+        *array("x_peak", N_MAX, causality="output", unit="m",
+               description="peak |x[i]| so far, located inside the steps"),
+        *array("drift_peak", N_MAX, causality="output", unit="m",
+               description="peak |drift[i]| so far, located inside the steps"),
+        *array("a_peak", N_MAX, causality="output", unit="m/s2",
+               description="peak |a[i]| so far (the building's own, with the held force), located inside the steps"),
+        *array("drift_ratio_peak", N_MAX, causality="output", unit="1",
+               description="drift_peak[i] / storey_height[i]"),
+        *array("mu", N_MAX, causality="output", unit="1",
+               description="ductility demand drift_peak[i] / (Fy[i] / k[i]); 0 if Fy[i] = 0"),
+        *array("drift_residual", N_MAX, causality="output", unit="m",
+               description="plastic part of the drift, drift[i] - V[i] / k[i] (the residual drift at rest)"),
         Variable("E_kinetic", causality="output", unit="J", description="kinetic energy of the relative motion"),
-        Variable("E_strain", causality="output", unit="J", description="strain energy of the storey springs"),
+        Variable("E_strain", causality="output", unit="J",
+                 description="strain energy of the storeys (elastic part)"),
         Variable("E_damping", causality="output", unit="J", description="energy dissipated by viscous damping"),
+        Variable("E_hysteretic", causality="output", unit="J",
+                 description="energy dissipated by yielding storeys"),
         Variable("E_input", causality="output", unit="J",
                  description="relative input energy of the ground motion, -int v' M 1 ag dt"),
         Variable("E_external", causality="output", unit="J", description="work of the external forces F"),
     )
+    PRIVATE_STATE = ("_state",)
 
     def __init__(self, **kwargs):
+        self._state = None
+        self._derived_cache = None
         super().__init__(**kwargs)
         # Storey elements are checked only up to n_storeys (in validate): unused ones are ignored.
         self._element_checks = tuple(slot for slot in self._checked if slot[2] is not None)
         self._checked = [slot for slot in self._checked if slot[2] is None]
         # The finite-input check is done in step(), vectorised over the active storeys: the
-        # per-variable loop of the base class costs more than the step itself (21 inputs).
+        # per-variable loop of the base class costs more than the step itself.
         self._real_inputs = []
         self._building: ShearBuilding | None = None
-        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._integrator = None
+        self._steps: dict[float, tuple[np.ndarray, np.ndarray | None]] = {}
+        self.cost = StepCost()   # cost counters since initialisation (not part of the FMU state)
 
+    # -- derived outputs, computed when read -------------------------------------------------------
+    def _element_getter(self, attr, idx):
+        if attr not in _DERIVED:
+            return super()._element_getter(attr, idx)
+
+        def get():
+            if self._state is None or idx >= self._n:
+                return 0.0
+            return float(self._derived()[attr][idx])
+        return get
+
+    def _derived(self) -> dict[str, np.ndarray]:
+        cached = self._derived_cache
+        if cached is None:
+            state, integ = self._state, self._integrator
+            integ.resolve_peaks(state, self.cost)      # the in-step peak searches left to do
+            heights = self.storey_height[:self._n]
+            cached = self._derived_cache = {
+                "V": integ.storey_shear(state),
+                "drift_residual": integ.residual_drift(state),
+                "x_peak": state.peak_x,
+                "drift_peak": state.peak_drift,
+                "a_peak": state.peak_accel,
+                "drift_ratio_peak": state.peak_drift / heights,
+                "mu": state.peak_drift * self._inv_yield_drift,
+            }
+        return cached
+
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        self._derived_cache = None
+
+    # -- initialisation ------------------------------------------------------------------------
     def validate(self):
         n = int(self.n_storeys)
         for var, attr, idx in self._element_checks:
@@ -98,28 +193,55 @@ class Building(Fmi2Slave):
                 building = ShearBuilding.from_period(self.T1, masses, stiffnesses, self.zeta, self.damping)
             else:
                 building = ShearBuilding(masses, stiffnesses, self.zeta, self.damping)
+            hysteresis = StoreyHysteresis(str(self.hysteresis), self.Fy[:n].copy(), float(self.alpha),
+                                          float(self.bw_n), float(self.bw_beta), float(self.bw_gamma))
+            integrator = integrator_for(building, hysteresis)
+            state = integrator.initial_state(self.x0[:n], self.v0[:n], self.F[:n])
         except ValueError as exc:
             raise SlaveError(f"invalid parameters: {exc}") from None
         self._building = building
+        self._integrator = integrator
+        self._legacy = hysteresis.model == "linear"   # the linear zero-order-hold step of old
+        self._free_mass = building.is_free_mass
         self._n = n
+        self._state = state
+        self._derived_cache = None
+        self.cost = StepCost()
+        fy = self.Fy[:n]
+        with np.errstate(divide="ignore"):
+            self._inv_yield_drift = np.where(fy > 0.0, building.stiffnesses / np.where(fy > 0.0, fy, 1.0), 0.0)
         self._y = np.zeros(3 * n + 1)  # work buffer [u; v; ag; f]
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
         self._steps = {}
         for out in (self.x, self.v, self.a, self.drift):
             out[:] = 0.0
-        self.x[:n] = self.x0[:n]
-        self.v[:n] = self.v0[:n]
-        self.E_input = self.E_external = self.E_damping = 0.0
-        u, v = self.x[:n], self.v[:n]
-        self.a[:n] = self._R @ np.concatenate([u, v]) + self.F[:n] / building.masses
-        self.drift[:n] = building.drifts(u)
-        self.base_shear = float(building.stiffnesses[0] * u[0])
-        self.E_kinetic = building.kinetic_energy(v)
-        self.E_strain = building.strain_energy(u)
+        self._publish(self.F[:n])
 
-    def _step_matrix(self, h: float) -> np.ndarray:
-        """``G`` with ``G @ y`` = [u1; v1; a1; drift1; du; m' du; Q y; sqrt(m) v1; sqrt(k) drift1].
+    def _publish(self, force) -> None:
+        """Outputs from the state (the integrator path and initialisation)."""
+        n, state = self._n, self._state
+        drift, V, accel, strain = self._integrator.response(state, force)
+        self.x[:n] = state.u
+        self.v[:n] = state.v
+        self.drift[:n] = drift
+        if self._legacy:   # as the linear model always computed it (bit for bit)
+            self.a[:n] = self._R @ np.concatenate([state.u, state.v]) + force / self._building.masses
+        else:
+            self.a[:n] = accel
+        self.base_shear = float(V[0])
+        self.E_kinetic = 0.5 * float(state.v @ (self._building.masses * state.v))
+        self.E_strain = strain
+        self.E_input = state.E_input
+        self.E_external = state.E_external
+        self.E_damping = state.E_damping
+        self.E_hysteretic = state.E_hysteretic
+        self._derived_cache = None
+
+    # -- stepping ----------------------------------------------------------------------------
+    def _step_matrix(self, h: float):
+        """``G`` with ``G @ y`` = [u1; v1; a1; drift1; du; m' du; Q y; sqrt(m) v1; sqrt(k) drift1],
+        and the matrices of the in-step peak search (``ExactPiecewiseLinear.legacy_rows``).
 
         ``y = [u0; v0; ag; f]``; ``Q`` is the exact damping-energy form (``E_damping = y' Q y``).
         Everything a step needs is one matrix-vector product and three dot products.
@@ -134,10 +256,11 @@ class Building(Fmi2Slave):
         du = Su - np.eye(n, 3 * n + 1)
         G = np.vstack([S, accel, D @ Su, du, b.masses @ du, prop.damping_form,
                        np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
+        peaks = None if self._free_mass else self._integrator.legacy_rows(h)
         if len(self._steps) >= _MAX_CACHED_STEPS:
             self._steps.pop(next(iter(self._steps)))
-        G = self._steps[h] = np.ascontiguousarray(G)
-        return G
+        entry = self._steps[h] = (np.ascontiguousarray(G), peaks)
+        return entry
 
     @staticmethod
     def _non_finite_input(ag: float, f: np.ndarray) -> str:
@@ -147,30 +270,126 @@ class Building(Fmi2Slave):
         return f"input F[{i + 1}] = {float(f[i])!r} N is not finite"
 
     def step(self, current_time: float, step_size: float) -> None:
-        G = self._steps.get(step_size)
-        if G is None:
-            G = self._step_matrix(step_size)
+        knots = self._knots(current_time, step_size) if self.n_knots else None
+        if knots is None and self._legacy:
+            self._linear_step(step_size)
+            return
+        n = self._n
+        f = self.F[:n]
+        if knots is None:
+            ag = float(self.ag)
+            if not (math.isfinite(ag) and np.isfinite(f).all()):
+                raise SlaveError(self._non_finite_input(ag, f))
+            times, values = (0.0, step_size), (ag, ag)
+        else:
+            if not np.isfinite(f).all():
+                raise SlaveError(self._non_finite_input(0.0, f))
+            if self._free_mass:
+                raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
+                                 "ag held over the step (n_knots = 0)")
+            times, values = knots
+        try:
+            cost = self._integrator.advance(self._state, times, values, f)
+        except ValueError as exc:
+            raise SlaveError(str(exc)) from None
+        self._count(cost)
+        self._publish(f)
+
+    def _count(self, cost: StepCost) -> None:
+        total = self.cost
+        total.segments += cost.segments
+        total.cleared += cost.cleared
+        total.events += cost.events
+        total.root_searches += cost.root_searches
+        total.peak_searches += cost.peak_searches
+        total.peaks_deferred += cost.peaks_deferred
+        total.rk_steps += cost.rk_steps
+        total.rhs_evaluations += cost.rhs_evaluations
+
+    def _linear_step(self, step_size: float) -> None:
+        """The linear zero-order-hold step: one cached matrix, bit for bit as in earlier versions."""
+        entry = self._steps.get(step_size)
+        if entry is None:
+            entry = self._step_matrix(step_size)
+        G, peaks = entry
         n = self._n
         ag = self.ag
         f = self.F[:n]
-        if not (math.isfinite(ag) and np.isfinite(f).all()):
+        # one reduction instead of a per-element test; a sum that overflows is looked at closely
+        if not (math.isfinite(ag) and math.isfinite(f.sum())) and not (
+                math.isfinite(ag) and np.isfinite(f).all()):
             raise SlaveError(self._non_finite_input(ag, f))
+        state = self._state
         y = self._y
-        y[:n] = self.x[:n]
-        y[n:2 * n] = self.v[:n]
+        y[:n] = state.u
+        y[n:2 * n] = state.v
         y[2 * n] = ag
         y[2 * n + 1:] = f
         w = G @ y
+        if peaks is None:
+            self._free_mass_peaks(ag, f[0], step_size)
+        else:
+            start, scan, change = peaks
+            self._integrator.legacy_peaks(state, y, start @ y, scan, change, step_size, self.cost)
         i = 4 * n
+        state.u = w[:n]           # views of the fresh product: nothing else writes to w
+        state.v = w[n:2 * n]
         self.x[:n] = w[:n]
         self.v[:n] = w[n:2 * n]
         self.a[:n] = w[2 * n:3 * n]
         self.drift[:n] = w[3 * n:i]
         self.base_shear = float(self._building.stiffnesses[0] * w[0])
-        self.E_external += float(f @ w[i:i + n])
-        self.E_input -= ag * float(w[i + n])
+        state.E_external += float(f @ w[i:i + n])
+        state.E_input -= ag * float(w[i + n])
         j = i + n + 1
         k = j + 3 * n + 1
-        self.E_damping += float(y @ w[j:k])
+        state.E_damping += float(y @ w[j:k])
+        self.E_external = state.E_external
+        self.E_input = state.E_input
+        self.E_damping = state.E_damping
         self.E_kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
         self.E_strain = 0.5 * float(w[k + n:] @ w[k + n:])
+        self._derived_cache = None
+
+    def _free_mass_peaks(self, ag: float, force: float, h: float) -> None:
+        """In-step peaks of a free mass: u(s) = u0 + v0 s + acc s^2 / 2 with acc = F/m - ag."""
+        state = self._state
+        u0, v0 = float(state.u[0]), float(state.v[0])
+        acc = force / float(self._building.masses[0]) - ag
+        candidates = [abs(u0 + v0 * h + 0.5 * acc * h * h)]
+        if acc != 0.0 and 0.0 < -v0 / acc < h:
+            s = -v0 / acc
+            candidates.append(abs(u0 + v0 * s + 0.5 * acc * s * s))
+        peak = max(float(state.peaks[0]), *candidates)
+        state.peaks = np.array([peak, peak, max(float(state.peaks[2]), abs(force / float(self._building.masses[0])))])
+
+    def _knots(self, t: float, h: float):
+        """Knot times relative to the step start and values, checked against the step."""
+        count = int(self.n_knots)
+        if not 2 <= count <= KNOT_CAPACITY:
+            raise SlaveError(f"input n_knots = {count} is outside the allowed range: 0 (ag held) or "
+                             f"2 <= n_knots <= {KNOT_CAPACITY}")
+        times = self.t_knot[:count]
+        values = self.ag_knot[:count]
+        if not (np.isfinite(times).all() and np.isfinite(values).all()):
+            for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
+                bad = np.flatnonzero(~np.isfinite(arr))
+                if bad.size:
+                    i = int(bad[0])
+                    raise SlaveError(f"input {name}[{i + 1}] = {float(arr[i])!r} {unit} is not finite")
+        tol = _KNOT_TIME_TOL * h
+        if abs(times[0] - t) > tol or abs(times[-1] - (t + h)) > tol:
+            raise SlaveError(
+                f"the knots t_knot[1..{count}] cover [{times[0]:.9g}, {times[-1]:.9g}] s but this step is "
+                f"[{t:.9g}, {t + h:.9g}] s: feed the ground motion's knots of the same step (step the "
+                f"ground motion first, as Gauss-Seidel does; a Jacobi master hands over the previous "
+                f"step's) or set n_knots = 0")
+        rel = times - t
+        if (rel[1:] < rel[:-1]).any():
+            i = int(np.flatnonzero(np.diff(times) < 0.0)[0])
+            raise SlaveError(f"input t_knot must not decrease: t_knot[{i + 1}] = {times[i]:.9g} s > "
+                             f"t_knot[{i + 2}] = {times[i + 1]:.9g} s")
+        rel[0] = 0.0
+        rel[-1] = h
+        np.clip(rel, 0.0, h, out=rel)
+        return rel, values.copy()

@@ -192,7 +192,7 @@ class SlaveBase(Fmi2Slave):
         attr = var.attribute
         if idx is None:
             setattr(self, attr, var.start)
-            getter = None
+            getter = self._scalar_getter(attr)
             setter = None
         else:
             getattr(self, attr)[idx] = var.start
@@ -204,6 +204,11 @@ class SlaveBase(Fmi2Slave):
                 start=None if output else var.start),
             nested=False,
         )
+
+    def _scalar_getter(self, attr: str) -> Callable[[], Any] | None:
+        """Getter of a scalar variable; None = pythonfmu reads the attribute.  A subclass may
+        return a function that computes an output when it is read."""
+        return None
 
     def _element_getter(self, attr: str, idx: int) -> Callable[[], Any]:
         return lambda: getattr(self, attr)[idx]

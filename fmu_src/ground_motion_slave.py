@@ -16,6 +16,15 @@ targets at once, or ``target_sa`` without ``sa_period``, are refused at
 ``fmi2ExitInitializationMode`` before the file is read.  Outputs ``scale_factor`` (what was
 applied) and ``sa_at_period`` (PSa of the played record at ``sa_period``, 0 without a period).
 A record whose PGA is implausible for its stated unit is played, with a warning in the log.
+
+Knots (``n_knots``, ``t_knot[k]``, ``ag_knot[k]``, k = 1..KNOT_CAPACITY): the record over the
+last step ``[t, t + h]`` exactly, as the polyline through ``(t, ag(t+))``, every sample strictly
+inside and ``(t + h, ag(t + h-))`` (a jump where the record starts or ends is two knots at one
+time; ``fmu_src/record_knots.py``).  A building fed these knots integrates the record exactly
+over any step length.  A step that needs more than KNOT_CAPACITY knots still succeeds and sets
+``n_knots = 0``: use ``ag_mean`` for it.  Elements beyond ``n_knots`` are 0; before the first
+step ``n_knots = 0``.  The knots are computed when first read after a step (a host that does
+not read them does not pay for them).
 """
 from __future__ import annotations
 
@@ -23,8 +32,9 @@ from pathlib import Path
 
 from pythonfmu.enums import Fmi2Status
 
-from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
+from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
 from .ground_records import FORMATS, G, MAX_PGA_G, UNITS, record_from_parameters, scaling_conflict
+from .record_knots import KNOT_CAPACITY, step_knots
 from .response_spectrum import DEFAULT_DAMPING, PERIOD_LIMITS, pseudo_acceleration
 
 
@@ -65,12 +75,54 @@ class GroundMotion(Fmi2Slave):
                  description="factor applied to the record's values (after the unit conversion)"),
         Variable("sa_at_period", causality="output", unit="m/s2",
                  description="pseudo-spectral acceleration of the played record at sa_period (0 if none)"),
+        Variable("n_knots", "Integer", causality="output", start=0,
+                 description=f"knots of the last step in t_knot/ag_knot (2..{KNOT_CAPACITY}); 0 = none "
+                             f"(before the first step, or a step spanning more record samples: use ag_mean)"),
+        *array("t_knot", KNOT_CAPACITY, causality="output", unit="s",
+               description="time of a knot of the record over the last step [t, t+h] (first t, last t+h)"),
+        *array("ag_knot", KNOT_CAPACITY, causality="output", unit="m/s2",
+               description="ground acceleration at the knot (the record is linear between knots)"),
     )
 
+    PRIVATE_STATE = ("_knot_step",)
+    _KNOTS = ("n_knots", "t_knot", "ag_knot")
+
     def __init__(self, **kwargs):
+        self._knot_step = None       # (t0, t1) of the step whose knots are not computed yet
         super().__init__(**kwargs)
         self._record = None
         self._start_time = 0.0
+
+    # -- knots, computed when read ---------------------------------------------------------------
+    def _scalar_getter(self, attr):
+        if attr == "n_knots":
+            return lambda: (self._fill_knots(), self.n_knots)[1]
+        return None
+
+    def _element_getter(self, attr, idx):
+        if attr not in self._KNOTS:
+            return super()._element_getter(attr, idx)
+
+        def get():
+            self._fill_knots()
+            return getattr(self, attr)[idx]
+        return get
+
+    def _fill_knots(self) -> None:
+        if self._knot_step is None:
+            return
+        t0, t1 = self._knot_step
+        self._knot_step = None
+        knots = step_knots(self._record, t0, t1, KNOT_CAPACITY)
+        self.t_knot[:] = 0.0
+        self.ag_knot[:] = 0.0
+        if knots is None:
+            self.n_knots = 0
+        else:
+            times, values = knots
+            self.n_knots = times.size
+            self.t_knot[:times.size] = times
+            self.ag_knot[:times.size] = values
 
     def setup_experiment(self, start_time, stop_time, tolerance):
         self._start_time = float(start_time or 0.0)
@@ -104,6 +156,10 @@ class GroundMotion(Fmi2Slave):
         self.ag = self.ag_mean = record.at(t)
         self.vg = record.velocity(t)
         self.dg = record.displacement(t)
+        self.n_knots = 0
+        self.t_knot[:] = 0.0
+        self.ag_knot[:] = 0.0
+        self._knot_step = None
 
     def _records_dir(self) -> Path | None:
         """This FMU's own bundled records (``resources/<package>/records``), if it has them.
@@ -125,3 +181,4 @@ class GroundMotion(Fmi2Slave):
         self.ag_mean = record.mean_over(current_time, t1)
         self.vg = record.velocity(t1)
         self.dg = record.displacement(t1)
+        self._knot_step = (current_time, t1)

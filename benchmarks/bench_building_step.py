@@ -1,0 +1,162 @@
+"""Cost of one building.fmu step, per storey law and ground-motion hold (prints figures; no assertions).
+
+    python benchmarks/bench_building_step.py [--repeat 5] [--fmpy]
+
+Drives the ``Building`` slave class directly (its ``do_step``, no FMI layer) through 40 s of
+El Centro at 0.3 g and prints the CPU time per communication step and per record interval
+(best of ``--repeat`` runs; CPU time, so that other processes on the machine disturb it less
+than wall time, but a loaded machine still inflates it: compare figures of one run), with the
+work counters of the exact integrator (share of segments cleared by the cheap bound, peak
+searches deferred / run (nothing reads the peaks here, so the deferred ones stay pending),
+root searches, events).  ``--fmpy`` also times set + doStep + getReal of every output through
+fmpy for the linear and the bilinear building (what a master pays per step).
+
+Cases: the linear building with the ground acceleration held over 10 ms steps (the model of
+earlier versions, bit for bit); the same with the record's knots (first-order hold) over 10 ms
+and over 0.3 s steps (30 record intervals per step: the long steps of issue 17); bilinear and
+Bouc-Wen storeys yielding to a ductility of about 3.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from fmu_src.building_slave import Building  # noqa: E402
+from fmu_src.ground_records import G, load_record  # noqa: E402
+from fmu_src.record_knots import step_knots  # noqa: E402
+
+BUILDINGS = {3: 0.5, 5: 1.0, 15: 1.5}     # storeys: T1 (s), 300 t floors, uniform stiffness
+STOP = 40.0
+
+
+def make(n: int, model: str = "linear") -> Building:
+    b = Building(instance_name=f"b{n}", resources=None, visible=False, logger=None)
+    b.n_storeys = n
+    b.T1 = BUILDINGS[n]
+    b.m[:n] = 3e5
+    b.k[:n] = 1.0
+    if model != "linear":
+        b.hysteresis = model
+        # base shear strength 0.1 W tapering up the height: ductility ~3 under El Centro at 0.3 g
+        b.Fy[:n] = 0.1 * n * 3e5 * G * np.linspace(1.0, 0.4, n)
+    b.exit_initialization_mode()
+    if b._error:
+        raise SystemExit(b._error)
+    return b
+
+
+def drive(b: Building, rec, h: float, knots: bool) -> float:
+    steps = int(round(STOP / h))
+    inputs = []
+    for i in range(steps):
+        t0, t1 = i * h, (i + 1) * h
+        if knots:
+            kt, ka = step_knots(rec, t0, t1)
+            inputs.append((t0, len(kt), kt, ka))
+        else:
+            inputs.append((t0, 0, rec.mean_over(t0, t1), None))
+    start = time.process_time()
+    for t0, count, a, b_ in inputs:
+        if count:
+            b.n_knots = count
+            b.t_knot[:count] = a
+            b.ag_knot[:count] = b_
+        else:
+            b.ag = a
+        if not b.do_step(t0, h):
+            raise SystemExit(f"step at {t0} failed")
+    return time.process_time() - start
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--fmpy", action="store_true", help="also time set + doStep + getReal through fmpy")
+    args = parser.parse_args(argv)
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * G / rec.pga)
+    cases = [(n, "linear", 0.01, False) for n in BUILDINGS] + \
+            [(n, "linear", 0.01, True) for n in (3, 5)] + [(n, "linear", 0.3, True) for n in (3, 5)] + \
+            [(n, "bilinear", 0.01, False) for n in (3, 5)] + [(3, "bilinear", 0.3, True)] + \
+            [(3, "bouc_wen", 0.01, False)]
+    print(f"{'storeys':>7} {'law':>9} {'hold':>6} {'h (s)':>6} {'us/step':>9} {'us/interval':>12} "
+          f"{'cleared':>8} {'peaks d/s':>10} {'roots':>6} {'events':>7} {'max mu':>7}")
+    for n, model, h, knots in cases:
+        best, building = None, None
+        for _ in range(args.repeat if model != "bouc_wen" else max(1, args.repeat // 3)):
+            b = make(n, model)
+            cpu = drive(b, rec, h, knots)
+            if best is None or cpu < best:
+                best, building = cpu, b
+        steps = int(round(STOP / h))
+        c = building.cost
+        segments = steps if building._legacy and not knots else c.segments   # legacy: one per step
+        cleared = f"{100.0 * c.cleared / max(segments, 1):.0f} %" if model != "bouc_wen" else "-"
+        mu = float(np.max(building._state.peak_drift * building._inv_yield_drift))
+        print(f"{n:>7} {model:>9} {'knots' if knots else 'ag':>6} {h:>6g} {1e6 * best / steps:>9.1f} "
+              f"{1e6 * best / (STOP / rec.dt):>12.2f} {cleared:>8} {f'{c.peaks_deferred}/{c.peak_searches}':>10} {c.root_searches:>6} "
+              f"{c.events:>7} {mu:>7.2f}")
+    if args.fmpy:
+        fmpy_costs()
+    return 0
+
+
+def fmpy_costs() -> None:
+    """set (ag) + doStep + getReal of the outputs of the used storeys, through fmpy."""
+    import timeit
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    from cosim.fmus import build_all
+    from cosim.master.fmi import exit_process
+
+    path = build_all(names=("building",))["building"]
+    md = read_model_description(str(path))
+    variables = {v.name: v for v in md.modelVariables}
+    unzipped = extract(str(path))
+    print("\nthrough fmpy (n = 5, 10 ms steps): set ag + doStep + getReal of the outputs of 5 storeys")
+    for model in ("linear", "bilinear"):
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=model)
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.setInteger([variables["n_storeys"].valueReference], [5])
+        fmu.setReal([variables["T1"].valueReference], [1.0])
+        for i in range(5):
+            fmu.setReal([variables[f"m[{i + 1}]"].valueReference, variables[f"k[{i + 1}]"].valueReference], [3e5, 1.0])
+        if model == "bilinear":
+            fmu.setString([variables["hysteresis"].valueReference], [model])
+            fy = 0.1 * 5 * 3e5 * G * np.linspace(1.0, 0.4, 5)
+            fmu.setReal([variables[f"Fy[{i + 1}]"].valueReference for i in range(5)], list(fy))
+        fmu.exitInitializationMode()
+        outputs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"
+                   and ("[" not in v.name or int(v.name.split("[")[1][:-1]) <= 5)]
+        ag_vr = [variables["ag"].valueReference]
+        rng = np.random.default_rng(0)
+        values = rng.normal(scale=2.0, size=4000)
+        state = {"i": 0}
+
+        def one_step():
+            i = state["i"] % 4000
+            fmu.setReal(ag_vr, [float(values[i])])
+            fmu.doStep(0.01 * state["i"], 0.01)
+            fmu.getReal(outputs)
+            state["i"] += 1
+        best = min(timeit.repeat(one_step, number=2000, repeat=5)) / 2000
+        print(f"  {model:9s} {len(outputs)} outputs: {1e6 * best:.1f} us per step (wall, best of 5)")
+        fmu.terminate()
+        fmu.freeInstance()
+    exit_process(0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

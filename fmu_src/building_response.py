@@ -1,0 +1,790 @@
+"""Response of a shear building with hysteretic storeys over one communication step.
+
+The step ``[0, h]`` (times relative to its start) is driven by
+
+* the ground acceleration, piecewise linear through knots ``(times[j], ag[j])`` with
+  ``times[0] = 0`` and ``times[-1] = h`` (first-order hold; two equal times encode a jump;
+  a zero-order hold is the two knots ``(0, a), (h, a)``), and
+* constant external floor forces ``force`` (N) (the contact FMU hands over the mean force).
+
+Two integrators, one per kind of law, registered in ``INTEGRATORS``:
+
+* :class:`ExactPiecewiseLinear` (``"linear"``, ``"bilinear"``): between yield and unloading
+  events the building is linear (:mod:`fmu_src.linear_response`) and its exact solution is
+  evaluated in modal form.  Events (an elastic storey reaching ``|d - s| = dy``; a yielding
+  storey whose drift velocity changes sign) are located by bisection and bracketed Newton to
+  ``EVENT_XTOL`` of the step.  The integration is exact up to round-off and that tolerance.
+* :class:`BoucWenRK` (``"bouc_wen"``): the smooth Bouc-Wen law has no closed form; an embedded
+  Runge-Kutta method of order 8(5,3) (Dormand-Prince, scipy's ``DOP853``) with error control
+  (``rtol``, default ``1e-8``) integrates every knot interval, restarted at knots (where the
+  forcing has a kink).
+
+Both track the energy terms (``E_input``, ``E_external``, ``E_damping``, ``E_hysteretic``) and
+the running peaks of ``|x[i]|``, ``|drift[i]|`` and the absolute floor acceleration ``|a[i]|``
+inside the step, not only at its end.  The exact integrator works in three tiers, so that a
+step where nothing happens costs a few vector operations:
+
+1. a bound on how far every watched function can move in the segment (precomputed per
+   configuration and segment length, :meth:`Configuration.change_bounds`, applied to
+   ``|z'(0)|``) clears most segments at once: no storey can reach its limit, no function can
+   pass its running peak;
+2. for the functions it does not clear, cubic Hermite interpolation through the end values and
+   slopes with a bound of the fourth derivative (:class:`~fmu_src.linear_response.Scan`);
+3. for the few left, bisection and bracketed Newton on the modal solution
+   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`).
+
+Bouc-Wen peaks are located on the dense output of every Runge-Kutta step where the
+derivative changes sign.  The absolute acceleration is the building's own, ``M^-1 (f - C v -
+D' V)`` with the held force.  Rayleigh or modal damping stays the initial (elastic) one in
+every state.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.integrate import DOP853
+from scipy.optimize import brentq
+
+from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
+                                bilinear_strain_energy, bilinear_tangent)
+from .linear_response import (Configuration, ModalSegment, Scan, first_root, hermite_range_scalar,
+                                     max_abs)
+from .shear_building import ShearBuilding
+
+EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
+PEAK_XTOL = 1e-7            # relative to the segment: a peak's time to 1e-7 L (its value to ~(w L 1e-7)^2)
+# Peaks are established to PEAK_RTOL relative (linear_response) plus these absolute amounts,
+# far below any engineering meaning: a response of 1e-15 m at the start of a record is not
+# searched through (its bounds are dominated by cancelling modal terms).
+PEAK_ATOL = (1e-12, 1e-12, 1e-9)   # |x| (m), |drift| (m), |a| (m/s^2)
+MAX_PENDING = 256           # deferred peak searches kept before they are run anyway
+MAX_EVENTS_PER_STEP = 10000  # a bound on yield/unloading events in one communication step
+MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
+_ROOT_BUDGET = 200          # evaluations per root search (bisection depth ~ 2^-100 of the segment)
+
+
+@dataclass
+class BuildingState:
+    """Everything a building carries from one step to the next (deep-copied by FMU state).
+
+    ``u``, ``v`` floor displacements (m) and velocities (m/s) relative to the ground;
+    ``slip`` (m) and ``mode`` (0, +1, -1) the bilinear storeys' state; ``z`` (-) the Bouc-Wen
+    variable and ``rk_step`` (s) its integrator's step (part of the state, so that a restored
+    state replays bit for bit); ``peaks`` the running peaks established so far and ``pending``
+    the segments that may still raise them (searched when the peaks are read); ``peaks`` the running peaks ``[|x| (m), |drift| (m), |a| (m/s^2)]`` (3n, also
+    as views ``peak_x``, ``peak_drift``, ``peak_accel``); energies (J) accumulated from the start.
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    slip: np.ndarray
+    mode: np.ndarray
+    z: np.ndarray
+    peaks: np.ndarray
+    E_input: float = 0.0
+    E_external: float = 0.0
+    E_damping: float = 0.0
+    E_hysteretic: float = 0.0
+    rk_step: float = 0.0      # Bouc-Wen: the last accepted Runge-Kutta step (s), the next first guess
+    # segments in which a peak may exceed ``peaks``, searched when the peaks are read
+    # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
+    pending: list = field(default_factory=list)
+
+    @property
+    def peak_x(self) -> np.ndarray:
+        return self.peaks[:self.u.size]
+
+    @property
+    def peak_drift(self) -> np.ndarray:
+        n = self.u.size
+        return self.peaks[n:2 * n]
+
+    @property
+    def peak_accel(self) -> np.ndarray:
+        return self.peaks[2 * self.u.size:]
+
+    def copy(self) -> "BuildingState":
+        return copy.deepcopy(self)
+
+
+@dataclass
+class StepCost:
+    """Cost counters of :meth:`advance` (summed by the caller if wanted)."""
+
+    segments: int = 0
+    cleared: int = 0          # segments cleared by the cheap bound (tier 1)
+    events: int = 0
+    root_searches: int = 0
+    peak_searches: int = 0    # in-step peak searches run (max_abs)
+    peaks_deferred: int = 0   # segments set aside for a search when the peaks are read
+    rk_steps: int = 0
+    rhs_evaluations: int = 0
+    event_log: list = field(default_factory=list)   # (time in the step (s), storey index, kind)
+
+
+def _drift(u: np.ndarray) -> np.ndarray:
+    d = u.copy()
+    d[1:] -= u[:-1]
+    return d
+
+
+def _floor_forces(V: np.ndarray) -> np.ndarray:
+    """``D' V``: storey shears to floor forces (storey i acts on floors i-1 and i)."""
+    out = V.copy()
+    out[:-1] -= V[1:]
+    return out
+
+
+class BuildingIntegrator:
+    """Common part of the integrators: parameters, derived outputs, initial state."""
+
+    name = ""
+
+    def __init__(self, building: ShearBuilding, hysteresis: StoreyHysteresis):
+        hysteresis.check(building.stiffnesses, building.damping_ratio)
+        self.building = building
+        self.hysteresis = hysteresis
+        n = building.n
+        self.n = n
+        self.k = building.stiffnesses
+        self.alpha = hysteresis.alpha
+        self.fy = hysteresis.yield_shear if hysteresis.inelastic else np.full(n, np.inf)
+        self.dy = hysteresis.yield_drift(self.k)
+        self.masses = building.masses
+        self.C = building.C
+
+    # -- storey quantities (overridden per law) ------------------------------------------------
+    def storey_shear(self, state: BuildingState) -> np.ndarray:
+        return self.k * _drift(state.u)
+
+    def strain_energy(self, state: BuildingState) -> float:
+        d = _drift(state.u)
+        return 0.5 * float(self.k @ (d * d))
+
+    def residual_drift(self, state: BuildingState) -> np.ndarray:
+        """``d - V / k`` per storey (m): see :mod:`fmu_src.hysteresis`."""
+        if not self.hysteresis.inelastic:
+            return np.zeros(self.n)
+        return _drift(state.u) - self.storey_shear(state) / self.k
+
+    def absolute_acceleration(self, state: BuildingState, force) -> np.ndarray:
+        """``M^-1 (f - C v - D' V)`` (m/s^2)."""
+        return (np.asarray(force, float) - self.C @ state.v - _floor_forces(self.storey_shear(state))) / self.masses
+
+    def response(self, state: BuildingState, force):
+        """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes)."""
+        d = _drift(state.u)
+        V, strain = self._shear_and_strain(state, d)
+        a = (force - self.C @ state.v - _floor_forces(V)) / self.masses
+        return d, V, a, strain
+
+    def _shear_and_strain(self, state, d):
+        # the strain energy as ShearBuilding.strain_energy writes it (the linear model, bit for bit)
+        return self.k * d, 0.5 * float(self.k @ (d * d))
+
+    def initial_state(self, u0, v0, force=None) -> BuildingState:
+        """The elastic initial state at ``(u0, v0)``; peaks start from its values."""
+        n = self.n
+        u0 = np.array(u0, dtype=float)
+        v0 = np.array(v0, dtype=float)
+        self.hysteresis.check(self.k, self.building.damping_ratio, _drift(u0))
+        d0 = _drift(u0)
+        z0 = d0 / self.dy if self.hysteresis.model == "bouc_wen" else np.zeros(n)
+        state = BuildingState(u=u0, v=v0, slip=np.zeros(n), mode=np.zeros(n, dtype=np.int64), z=z0,
+                              peaks=np.zeros(3 * n))
+        f = np.zeros(n) if force is None else np.asarray(force, float)
+        state.peaks = np.concatenate([np.abs(u0), np.abs(d0), np.abs(self.absolute_acceleration(state, f))])
+        return state
+
+    def advance(self, state: BuildingState, times, ag, force) -> StepCost:
+        raise NotImplementedError
+
+    def resolve_peaks(self, state: BuildingState, cost: StepCost | None = None) -> None:
+        """Run the deferred peak searches (none for integrators that search at once)."""
+
+
+class ExactPiecewiseLinear(BuildingIntegrator):
+    """Linear and bilinear storeys, exact between located events (see module docstring)."""
+
+    name = "exact"
+
+    def __init__(self, building: ShearBuilding, hysteresis: StoreyHysteresis):
+        super().__init__(building, hysteresis)
+        self._configs: OrderedDict[bytes, Configuration] = OrderedDict()
+        self.configurations_built = 0   # cost counter
+        n = self.n
+        self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
+        self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
+        self._inv_m = 1.0 / self.masses
+
+    # -- bilinear storey state -----------------------------------------------------------------
+    def storey_shear(self, state):
+        d = _drift(state.u)
+        if not self.hysteresis.inelastic:
+            return self.k * d
+        return self.alpha * self.k * d + bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip,
+                                                                state.mode)
+
+    def strain_energy(self, state):
+        if not self.hysteresis.inelastic:
+            return super().strain_energy(state)
+        return bilinear_strain_energy(self.k, self.alpha, _drift(state.u), state.slip, state.mode, self.fy)
+
+    def _shear_and_strain(self, state, d):
+        if not self.hysteresis.inelastic:
+            return super()._shear_and_strain(state, d)
+        q = bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip, state.mode)
+        hard = self.alpha * self.k * d
+        strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / ((1.0 - self.alpha) * self.k)))
+        return hard + q, strain
+
+    def configuration(self, mode: np.ndarray) -> Configuration:
+        """The linear system of a yield pattern (cached; Rayleigh/modal C stays the initial one)."""
+        if not self.hysteresis.inelastic and self._configs:
+            return next(iter(self._configs.values()))     # a linear building has one
+        key = (mode != 0).tobytes()
+        cfg = self._configs.get(key)
+        if cfg is None:
+            tangent = bilinear_tangent(self.k, self.alpha, mode) if self.hysteresis.inelastic else self.k
+            cfg = Configuration(self.masses, self.C, tangent)
+            if len(self._configs) >= MAX_CONFIGURATIONS:
+                self._configs.popitem(last=False)
+            self._configs[key] = cfg
+            self.configurations_built += 1
+        else:
+            self._configs.move_to_end(key)
+        return cfg
+
+    def _net_force(self, state, force):
+        """``p = f - D' r``: external force minus the storeys' constant offsets (N)."""
+        if not self.hysteresis.inelastic:
+            return np.asarray(force, float)
+        r = bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode)
+        return force - _floor_forces(r)
+
+    # -- stepping -----------------------------------------------------------------------------
+    def advance(self, state, times, ag, force) -> StepCost:
+        times = np.asarray(times, dtype=float)
+        ag = np.asarray(ag, dtype=float)
+        force = np.asarray(force, dtype=float)
+        if not self.hysteresis.inelastic and times.size > 3:
+            return self._advance_linear(state, times, ag, force)    # worth batching
+        cost = StepCost()
+        events = 0
+        h = float(times[-1] - times[0])
+        for j in range(times.size - 1):
+            length = float(times[j + 1] - times[j])
+            if length <= 0.0:
+                continue                      # a jump of the record: no time passes
+            slope = (ag[j + 1] - ag[j]) / length
+            events += self._interval(state, length, float(ag[j]), float(slope), force, cost, h,
+                                     float(times[j] - times[0]))
+            if events > MAX_EVENTS_PER_STEP:
+                raise ValueError(f"more than {MAX_EVENTS_PER_STEP} yield/unloading events in one step of "
+                                 f"{h:.6g} s: the storeys chatter at their yield limits; use shorter steps")
+        cost.events = events
+        return cost
+
+    def _advance_linear(self, state, times, ag, force) -> StepCost:
+        """A linear building over all the knot intervals of a step at once.
+
+        Without events the intervals only chain through the state: one matrix-vector product
+        each (with the cached map of its length) carries the state across them; then one
+        matrix product per distinct length gives every interval's energies and tier-1 test
+        quantities, and only the intervals whose test fails (a peak may grow) are looked at one
+        by one.  Same arithmetic as :meth:`_interval` per interval, without its per-interval
+        overhead (a step of 30 record intervals costs little more than one).
+        """
+        n = self.n
+        cost = StepCost()
+        lengths = np.diff(times)
+        idx = np.flatnonzero(lengths > 0.0)          # equal times: a jump, no time passes
+        count = idx.size
+        cfg = self.configuration(state.mode)
+        size = 3 * n + 2
+        Y = np.empty((count, size))
+        Y[:, 2 * n] = ag[idx]
+        Y[:, 2 * n + 1] = (ag[idx + 1] - ag[idx]) / lengths[idx]
+        Y[:, 2 * n + 2:] = force
+        maps = [cfg.segment_map(float(L)) for L in lengths[idx]]
+        z = np.concatenate([state.u, state.v])
+        for j in range(count):
+            Y[j, :2 * n] = z
+            z = maps[j].state @ Y[j]
+        cost.segments = count
+        groups: dict[int, list[int]] = {}
+        for j, smap in enumerate(maps):
+            groups.setdefault(id(smap), []).append(j)
+        e_damp = e_in = 0.0
+        flagged = []
+        accel_offset = force * self._inv_m
+        peaks = state.peaks
+        for js in groups.values():
+            smap = maps[js[0]]
+            rows = 6 * n + smap.scan.shape[0]
+            Yg = Y[js]
+            out = Yg @ smap.stacked.T
+            e_damp += float(np.einsum("ij,ij->", Yg, out[:, rows:rows + size]))
+            e_in += float(np.einsum("ij,ij->", Yg, out[:, rows + size:]))
+            bound = np.abs(out[:, rows - 4 * n:rows]) @ smap.change.T
+            slopes = np.abs(Yg[:, 2 * n + 1])
+            if slopes.any():
+                bound += slopes[:, None] * smap.ramp_change
+            watched = np.abs(out[:, 2 * n:5 * n] + np.concatenate([np.zeros(2 * n), accel_offset]))
+            # against the peaks at the step start: a superset of what later intervals need
+            need = (watched + bound[:, :3 * n] > peaks).any(axis=1)
+            flagged.extend((js[i], out[i, 6 * n:rows]) for i in np.flatnonzero(need))
+        cost.cleared = count - len(flagged)
+        xtol = EVENT_XTOL * float(times[-1] - times[0])
+        for j, scan_vector in sorted(flagged, key=lambda item: item[0]):
+            L = maps[j].length
+            y = Y[j].copy()
+            scan = Scan(cfg, scan_vector, float(y[2 * n + 1]), L)
+            self._peaks(cfg, scan, None, state, y, force, L, xtol, cost)
+        state.E_damping += e_damp
+        state.E_input += e_in
+        u1 = z[:n].copy()
+        state.E_external += float(force @ (u1 - state.u))
+        state.u = u1
+        state.v = z[n:].copy()
+        return cost
+
+    def _interval(self, state, length, ag0, ag1, force, cost, h, start) -> int:
+        """One knot interval (linear ground acceleration), split at events."""
+        n = self.n
+        s = 0.0
+        events = 0
+        xtol = EVENT_XTOL * max(h, length)
+        inelastic = self.hysteresis.inelastic
+        while length - s > xtol:
+            rem = length - s
+            cfg = self.configuration(state.mode)
+            p = self._net_force(state, force)
+            y = np.empty(3 * n + 2)
+            y[:n] = state.u
+            y[n:2 * n] = state.v
+            y[2 * n] = ag0 + ag1 * s
+            y[2 * n + 1] = ag1
+            y[2 * n + 2:] = p
+            w = y[2 * n:]
+            z0 = y[:2 * n]
+            segment = None
+            e_damp = e_in = None
+            change = None
+            if s == 0.0:
+                # a whole knot interval or step (a repeated length): one product with the
+                # cached map gives the end state, z'(0), the watched values, the test
+                # quantities and the energy forms
+                smap = cfg.segment_map(rem)
+                out = smap.stacked @ y
+                size = y.size
+                rows = 6 * n + smap.scan.shape[0]
+                z1 = out[:2 * n]
+                watched = out[2 * n:6 * n]
+                scan_vector = out[6 * n:rows]
+                e_damp = float(y @ out[rows:rows + size])
+                e_in = float(y @ out[rows + size:])
+                change = smap.change
+            else:
+                segment = ModalSegment(cfg, z0, w)
+                z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, rem)
+                scan_vector = cfg.scan_vector(z0, z1, w, rem)
+            cost.segments += 1
+            # tier 1: how far can every watched function move in this segment?
+            peak_flags = unload_flags = up_flags = down_flags = None
+            if change is not None:
+                bound = change @ np.abs(scan_vector[-4 * n:])
+                if ag1 != 0.0:
+                    bound += abs(ag1) * smap.ramp_change
+                watched[2 * n:3 * n] += p * self._inv_m
+                # strict (no tolerance): a segment cleared here records no end value
+                peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
+                if inelastic:
+                    e0 = watched[n:2 * n] - state.slip
+                    reach = bound[n:2 * n]
+                    elastic = state.mode == 0
+                    up_flags = elastic & (e0 + reach >= self.dy)
+                    down_flags = elastic & (e0 - reach <= -self.dy)
+                    unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                    quiet = not (up_flags.any() or down_flags.any() or unload_flags.any())
+                else:
+                    quiet = True
+                if quiet and not peak_flags.any():
+                    cost.cleared += 1
+                    self._commit(state, z1, force, e_damp, e_in)
+                    return events
+            scan = Scan(cfg, scan_vector, ag1, rem)
+            event = None
+            if inelastic:
+                event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags, unload_flags)
+            stop = rem
+            if event is not None:
+                stop = event[0]
+                segment = segment or ModalSegment(cfg, z0, w)
+                if stop > 0.0:
+                    z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, stop)
+                    scan = Scan(cfg, cfg.scan_vector(z0, z1, w, stop), ag1, stop)
+                e_damp = None
+            if stop > 0.0:
+                if e_damp is None:
+                    segment = segment or ModalSegment(cfg, z0, w)
+                    e_damp, e_in = cfg.energies(segment.q0, segment.beta0, segment.beta1, w, stop)
+                self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
+                self._commit(state, z1, force, e_damp, e_in)
+            s += stop
+            if event is not None:
+                self._switch(state, event[1], event[2])
+                cost.event_log.append((start + s, event[1], event[2]))
+                events += 1
+                if events > MAX_EVENTS_PER_STEP:
+                    break
+        return events
+
+    def _commit(self, state, z1, force, e_damp, e_in):
+        n = self.n
+        u1 = z1[:n].copy()
+        state.E_external += float(force @ (u1 - state.u))
+        state.E_damping += e_damp
+        state.E_input += e_in
+        if self.hysteresis.inelastic:
+            yielding = state.mode != 0
+            if yielding.any():
+                d0 = _drift(state.u)
+                d1 = _drift(u1)
+                # a yielding storey dissipates (1 - alpha) Fy per unit of slip; its drift is
+                # monotonic in the direction of mode over the segment (unloading is an event)
+                state.E_hysteretic += float(np.sum(((1.0 - self.alpha) * self.fy * state.mode * (d1 - d0))[yielding]))
+                state.slip = np.where(yielding, d1 - state.mode * self.dy, state.slip)
+        state.u = u1
+        state.v = z1[n:].copy()
+
+    def _switch(self, state, storey: int, kind: int):
+        """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
+        d = _drift(state.u)[storey]
+        mode = state.mode.copy()
+        slip = state.slip.copy()
+        if kind == 0:
+            slip[storey] = d - mode[storey] * self.dy[storey]   # elastic again, at the limit
+        mode[storey] = kind
+        state.mode = mode
+        state.slip = slip
+
+    # -- events -------------------------------------------------------------------------------
+    def _first_event(self, cfg, scan, state, y, rem, xtol, cost, up_flags=None, down_flags=None,
+                     unload_flags=None):
+        """``(time, storey, kind)`` of the first event in [0, rem], or None.
+
+        Events: an elastic storey whose plastic element reaches its strength (``|d - s| = dy``;
+        kind = the direction) and a yielding storey whose drift velocity changes sign (kind 0).
+        Tier 2 (cubic Hermite through the drift rows of the scan, with the bound of the fourth
+        or fifth derivative) narrows the candidates of tier 1; the rest are searched one by one
+        (:func:`first_root`) up to the earliest event found so far.
+        """
+        n = self.n
+        mode = state.mode
+        if up_flags is None:
+            elastic = mode == 0
+            up_flags = down_flags = elastic
+            unload_flags = ~elastic
+        w4 = rem ** 4 / 384.0
+        G, B = scan.G, scan.B
+        candidates = []
+        for i in np.flatnonzero(up_flags | down_flags | unload_flags):
+            r = n + i                                   # the drift row of storey i
+            if mode[i] == 0:
+                s = state.slip[i]
+                lo, hi = hermite_range_scalar(G[r, 0] - s, G[r, 1] - s, rem * G[r, 2], rem * G[r, 3])
+                err = B[r, 0] * w4
+                if up_flags[i] and hi + err >= self.dy[i]:
+                    candidates.append((i, +1))
+                if down_flags[i] and lo - err <= -self.dy[i]:
+                    candidates.append((i, -1))
+            elif unload_flags[i]:
+                sg = float(mode[i])
+                lo, _ = hermite_range_scalar(sg * G[r, 2], sg * G[r, 3], rem * sg * G[r, 4], rem * sg * G[r, 5])
+                if lo - B[r, 1] * w4 <= 0.0:
+                    candidates.append((i, 0))
+        if not candidates:
+            return None
+        segment = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+        best = None
+        D = self._drift_rows
+        for i, kind in candidates:
+            row = np.zeros(2 * n)
+            if kind == 0:
+                row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
+                offset = 0.0
+            else:
+                row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
+                offset = self.dy[i] + kind * state.slip[i]
+            c_modal = row @ cfg.V
+            horizon = rem if best is None else best[0]
+            if horizon <= 0.0:
+                return best
+            cost.root_searches += 1
+            t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
+            if t is not None and (best is None or t < best[0]):
+                best = (t, int(i), kind)
+        return best
+
+    # -- peaks --------------------------------------------------------------------------------
+    def _peaks(self, cfg, scan, segment, state, y, p, length, xtol, cost, flags=None):
+        """Update the running peaks of |x|, |drift|, |a| over a segment of the exact solution.
+
+        The end values are recorded; the functions that tier 1 (``flags``; all if None) could
+        not clear are tested by the cubic Hermite bound and, where a new peak remains possible,
+        the segment is kept in ``state.pending`` for a search when the peaks are read
+        (:meth:`resolve_peaks`): a peak that a later step exceeds is never searched.
+        """
+        n = self.n
+        G, B = scan.G, scan.B
+        g1 = G[:, 1].copy()
+        accel_offset = p * self._inv_m
+        g1[2 * n:] += accel_offset
+        new = np.maximum(state.peaks, np.abs(g1))
+        w4 = length ** 4 / 384.0
+        candidates = range(3 * n) if flags is None else np.flatnonzero(flags)
+        key = (state.mode != 0).tobytes()
+        deferred = []
+        for j in candidates:
+            offset = accel_offset[j - 2 * n] if j >= 2 * n else 0.0
+            g0 = G[j, 0] + offset
+            s0, s1 = G[j, 2], G[j, 3]
+            if s0 * s1 > 0.0:
+                # a slope that provably keeps its sign puts the extremes at the ends
+                lo, hi = hermite_range_scalar(s0, s1, length * G[j, 4], length * G[j, 5])
+                err = B[j, 1] * w4
+                if lo - err > 0.0 or hi + err < 0.0:
+                    continue
+            lo, hi = hermite_range_scalar(g0, g1[j], length * s0, length * s1)
+            if max(-lo, hi) + B[j, 0] * w4 <= new[j] + self._peak_atol[j]:
+                continue
+            # a new peak is possible in this segment: keep it for a search when the peaks are
+            # read (most are superseded by a later, higher peak before anyone reads them)
+            deferred.append((int(j), max(-lo, hi) + B[j, 0] * w4, key, y, length, xtol))
+        state.peaks = new
+        if deferred:
+            y_copy = y.copy()
+            state.pending.extend((j, U, k_, y_copy, L, xt) for j, U, k_, _, L, xt in deferred)
+            cost.peaks_deferred += len(deferred)
+            if len(state.pending) > MAX_PENDING:
+                # drop what the established peaks already exceed; search if still too many
+                atol = self._peak_atol
+                state.pending = [e for e in state.pending if e[1] > new[e[0]] + atol[e[0]]]
+                if len(state.pending) > MAX_PENDING // 2:
+                    self.resolve_peaks(state, cost)
+
+    def resolve_peaks(self, state, cost=None) -> None:
+        """Run the deferred peak searches, highest bound first (:func:`max_abs`)."""
+        if not state.pending:
+            return
+        n = self.n
+        cost = cost or StepCost()
+        new = state.peaks.copy()
+        atol = self._peak_atol
+        segments = {}
+        for j, bound, key, y, length, xtol in sorted(state.pending, key=lambda e: -e[1]):
+            if bound <= new[j] + atol[j]:
+                continue
+            cfg = self._configuration_of(key)
+            segment = segments.get(id(y))
+            if segment is None:
+                segment = segments[id(y)] = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+            offset = y[2 * n + 2 + j - 2 * n] * self._inv_m[j - 2 * n] if j >= 2 * n else 0.0
+            cost.peak_searches += 1
+            new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,
+                                min_width=xtol, budget=_ROOT_BUDGET, atol=atol[j])
+        state.peaks = new
+        state.pending = []
+
+    def _configuration_of(self, key: bytes) -> Configuration:
+        return self.configuration(np.frombuffer(key, dtype=bool).astype(np.int64))
+
+    # -- the linear zero-order-hold step computed elsewhere (building_slave) -------------------
+    def legacy_rows(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For a zero-order-hold step ``h`` of the elastic building acting on ``y = [u0; v0; ag; f]``:
+        ``(start, scan, reach)``: ``start @ y = [Re W z'(0); Im W z'(0); watched functions at 0
+        (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector, and ``reach @ |start @ y|``
+        the tier-1 bound of every watched function over the step (its value at 0 plus the
+        change bound acting on ``|Re| + |Im|``, an upper bound of the modal amplitude)."""
+        cfg = self.configuration(np.zeros(self.n, dtype=np.int64))
+        smap = cfg.segment_map(h)
+        n = self.n
+        drop = 2 * n + 1     # the ag1 column: a zero-order hold has no ramp
+        scan = np.delete(smap.scan, drop, axis=1)
+        watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
+        watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)
+        start = np.ascontiguousarray(np.vstack([scan[-4 * n:], watch[:3 * n]]))
+        reach = np.ascontiguousarray(np.hstack([smap.change[:3 * n], np.eye(3 * n)]))
+        return start, np.ascontiguousarray(scan), reach
+
+    def legacy_peaks(self, state, y_zoh: np.ndarray, start_values: np.ndarray, scan_rows: np.ndarray,
+                     reach: np.ndarray, h: float, cost: StepCost) -> None:
+        """Running peaks over a zero-order-hold step of the elastic building (``y_zoh`` =
+        ``[u0; v0; ag; f]``, ``start_values = start @ y_zoh`` of :meth:`legacy_rows`);
+        ``state`` still holds the start of the step."""
+        flags = reach @ np.abs(start_values) > state.peaks    # strict, see _interval
+        if not flags.any():
+            cost.cleared += 1
+            return
+        n = self.n
+        cfg = self.configuration(state.mode)
+        y = np.empty(3 * n + 2)
+        y[:2 * n + 1] = y_zoh[:2 * n + 1]
+        y[2 * n + 1] = 0.0
+        y[2 * n + 2:] = y_zoh[2 * n + 1:]
+        scan = Scan(cfg, scan_rows @ y_zoh, 0.0, h)
+        self._peaks(cfg, scan, None, state, y, y[2 * n + 2:], h, EVENT_XTOL * h, cost, flags)
+
+
+class BoucWenRK(BuildingIntegrator):
+    """Bouc-Wen storeys, embedded Runge-Kutta 8(5,3) with error control (see module docstring)."""
+
+    name = "bouc_wen_rk"
+
+    def __init__(self, building: ShearBuilding, hysteresis: StoreyHysteresis, rtol: float = 1e-8):
+        super().__init__(building, hysteresis)
+        n = self.n
+        self.rtol = float(rtol)
+        h = hysteresis
+        self.bw = (h.bw_n, h.bw_beta, h.bw_gamma)
+        dy = self.dy
+        w1 = float(building.omegas[0])
+        # Absolute tolerances from the building's own scales: yield drift, its velocity at the
+        # fundamental frequency, z ~ 1, energy Fy dy.
+        scale_u = float(np.min(dy))
+        energy = float(np.sum(self.fy * dy))
+        self.atol = np.concatenate([np.full(n, scale_u), np.full(n, scale_u * w1), np.ones(n),
+                                    np.full(3, energy)]) * self.rtol
+        # q = P y: drifts, drift rates, C v and 1'M v in one product
+        D = np.eye(n) - np.eye(n, k=-1)
+        P = np.zeros((3 * n + 1, 3 * n + 3))
+        P[:n, :n] = D
+        P[n:2 * n, n:2 * n] = D
+        P[2 * n:3 * n, n:2 * n] = self.C
+        P[3 * n, n:2 * n] = self.masses
+        self._P = P
+        self._DT = np.ascontiguousarray(D.T)
+        self._inv_m = 1.0 / self.masses
+        self._inv_dy = 1.0 / dy
+
+    def _shear(self, d, z):
+        return self.alpha * self.k * d + (1.0 - self.alpha) * self.fy * z
+
+    def storey_shear(self, state):
+        return self._shear(_drift(state.u), state.z)
+
+    def strain_energy(self, state):
+        d = _drift(state.u)
+        return float(np.sum(0.5 * self.alpha * self.k * d * d
+                            + 0.5 * (1.0 - self.alpha) * self.fy * self.dy * state.z * state.z))
+
+    def _shear_and_strain(self, state, d):
+        return self._shear(d, state.z), self.strain_energy(state)
+
+    def _rhs(self, ag0, ag1, force):
+        """``y' = fun(s, y)`` with ``y = [u, v, z, E_damping, E_input, E_hysteretic]``."""
+        n = self.n
+        P, DT, inv_m, inv_dy = self._P, self._DT, self._inv_m, self._inv_dy
+        ak = self.alpha * self.k
+        hf = (1.0 - self.alpha) * self.fy
+        bw_n, beta, gamma = self.bw
+
+        def fun(s, y):
+            q = P @ y
+            d, dd, cv = q[:n], q[n:2 * n], q[2 * n:3 * n]
+            v = y[n:2 * n]
+            z = y[2 * n:3 * n]
+            ag = ag0 + ag1 * s
+            az = np.abs(z)
+            zn = az ** bw_n
+            sg = np.sign(dd * z)
+            out = np.empty_like(y)
+            out[:n] = v
+            out[n:2 * n] = (force - cv - DT @ (ak * d + hf * z)) * inv_m - ag
+            # Bouc-Wen rate and dissipation, see fmu_src.hysteresis
+            out[2 * n:3 * n] = dd * (1.0 - zn * (gamma + beta * sg)) * inv_dy
+            out[3 * n] = v @ cv
+            out[3 * n + 1] = -q[3 * n] * ag
+            out[3 * n + 2] = hf @ (az * zn * np.abs(dd) * (beta + gamma * sg))
+            return out
+        return fun
+
+    def _peak_values(self, y, dy_dt, force):
+        """Values and time derivatives of the tracked functions (x, drift, a) at one point."""
+        n = self.n
+        u, v, z = y[:n], y[n:2 * n], y[2 * n:3 * n]
+        acc_rel, zdot = dy_dt[n:2 * n], dy_dt[2 * n:3 * n]
+        d, dd = _drift(u), _drift(v)
+        V = self._shear(d, z)
+        Vdot = self.alpha * self.k * dd + (1.0 - self.alpha) * self.fy * zdot
+        a = (force - self.C @ v - _floor_forces(V)) / self.masses
+        adot = (-self.C @ acc_rel - _floor_forces(Vdot)) / self.masses
+        return np.concatenate([u, d, a]), np.concatenate([v, dd, adot])
+
+    def advance(self, state, times, ag, force) -> StepCost:
+        times = np.asarray(times, dtype=float)
+        ag = np.asarray(ag, dtype=float)
+        force = np.asarray(force, dtype=float)
+        cost = StepCost()
+        n = self.n
+        u_start = state.u.copy()
+        y = np.concatenate([state.u, state.v, state.z, [0.0, 0.0, 0.0]])
+        peaks = state.peaks.copy()
+        for j in range(times.size - 1):
+            length = float(times[j + 1] - times[j])
+            if length <= 0.0:
+                continue
+            slope = (ag[j + 1] - ag[j]) / length
+            fun = self._rhs(float(ag[j]), float(slope), force)
+            solver = DOP853(fun, 0.0, y, length, rtol=self.rtol, atol=self.atol,
+                            first_step=min(state.rk_step, length) if state.rk_step > 0.0 else None)
+            f_old = solver.f
+            vals_old, rates_old = self._peak_values(y, f_old, force)
+            while solver.status == "running":
+                solver.step()
+                cost.rk_steps += 1
+                if solver.status == "failed":
+                    raise ValueError(f"Bouc-Wen integration failed: {solver.message}")
+                y_new, f_new = solver.y, solver.f
+                vals_new, rates_new = self._peak_values(y_new, f_new, force)
+                peaks = np.maximum(peaks, np.abs(vals_new))
+                turning = np.flatnonzero(rates_old * rates_new < 0.0)
+                if turning.size:
+                    dense = solver.dense_output()
+                    for i in turning:
+                        cost.peak_searches += 1
+
+                        def rate(s, i=i):
+                            yy = dense(s)
+                            return self._peak_values(yy, fun(s, yy), force)[1][i]
+                        s_star = brentq(rate, solver.t_old, solver.t, xtol=1e-12 * length)
+                        yy = dense(s_star)
+                        value = abs(self._peak_values(yy, fun(s_star, yy), force)[0][i])
+                        peaks[i] = max(peaks[i], value)
+                vals_old, rates_old = vals_new, rates_new
+                if solver.step_size is not None and solver.status == "running":
+                    state.rk_step = float(solver.step_size)
+            cost.rhs_evaluations += solver.nfev
+            y = solver.y.copy()
+        state.u = y[:n].copy()
+        state.v = y[n:2 * n].copy()
+        state.z = y[2 * n:3 * n].copy()
+        state.E_damping += float(y[3 * n])
+        state.E_input += float(y[3 * n + 1])
+        state.E_hysteretic += float(y[3 * n + 2])
+        state.E_external += float(force @ (y[:n] - u_start))
+        state.peaks = peaks
+        return cost
+
+
+INTEGRATORS = {"linear": ExactPiecewiseLinear, "bilinear": ExactPiecewiseLinear, "bouc_wen": BoucWenRK}
+
+
+def integrator_for(building: ShearBuilding, hysteresis: StoreyHysteresis) -> BuildingIntegrator:
+    """The integrator of a hysteresis law (raises ValueError naming bad parameters)."""
+    return INTEGRATORS[hysteresis.model](building, hysteresis)

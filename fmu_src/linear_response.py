@@ -1,0 +1,729 @@
+"""Exact response of one linear stiffness configuration of a shear building to affine forcing.
+
+Between yield and unloading events a bilinear shear building is linear: every storey has a
+fixed tangent stiffness ``kt[i]`` (``k[i]`` elastic, ``alpha k[i]`` yielded) and a constant
+offset force.  With the state ``z = [u; v]`` (floor displacements and velocities relative to
+the ground) and a segment time ``s`` in ``[0, L]``
+
+    z' = A z + b0 + b1 s,   A = [[0, I], [-M^-1 Kt, -M^-1 C]],
+    b0 = [0; M^-1 p - 1 ag0],   b1 = [0; -1 ag1],
+
+where ``ag(s) = ag0 + ag1 s`` is the ground acceleration (piecewise linear between record
+samples: first-order hold) and ``p`` the constant net floor force (external force minus the
+storeys' offset forces).  The forcing vector of a segment is ``w = [ag0, ag1, p_1 .. p_n]``.
+
+Method (:class:`Configuration`): ``A = V diag(lam) V^-1`` is diagonalised once per
+configuration (cached by the caller); in modal coordinates ``q = V^-1 z`` every mode obeys
+``q' = lam q + beta0 + beta1 s`` and its exact solution is
+
+    q(s) = e^{lam s} q(0) + s phi1(lam s) beta0 + s^2 phi2(lam s) beta1,
+    phi1(x) = (e^x - 1) / x,   phi2(x) = (e^x - 1 - x) / x^2,
+
+valid for every ``lam`` including 0 (a mechanism with ``alpha = 0``): there is no division by
+an eigenvalue.  So the solution can be evaluated at any time of a segment for the cost of a
+few vector operations, which is what locating events and in-step peaks needs.  A defective
+``A`` (only for an undamped mechanism) or a nearly defective one is refused (condition number
+of ``V`` above ``MAX_CONDITION``): the modal form would lose digits there.
+
+Energies of a segment: ``int v' C v ds`` and ``-int (1'M v) ag ds`` are integrated by
+Gauss-Legendre quadrature (``GAUSS_POINTS`` per chunk, chunks no longer than
+``CHUNK_RATE / max|lam|``) of the exact solution.  The integrands are sums of exponentials
+``e^{mu s}`` (``|mu| <= 2 max|lam|``) and low-degree polynomials; for ``|mu| L_chunk <= 4``
+and 10 points the quadrature error is below 1e-18 relative (Gauss-Legendre remainder
+``(b - a)^(2m+1) (m!)^4 / ((2m+1) ((2m)!)^3) max|f^(2m)|``), i.e. the energies are exact to
+round-off like the state.
+
+:meth:`Configuration.segment_map` turns one segment length into real matrices (state map and
+the two energy quadratic forms) so that a segment of a repeated length (a record interval, a
+communication step) costs one matrix-vector product.
+
+Bounds for event and peak searches (:func:`derivative_bound`): for ``Re lam <= 0`` (a damped or
+undamped configuration; ``C`` and ``Kt`` are positive semi-definite) the modal amplitudes of
+``z'`` grow by at most ``L |beta1|`` over a segment of length ``L``, which bounds every higher
+derivative of a linear functional ``c' z`` over the segment.  With a cubic Hermite interpolant
+through the end values and slopes (error at most ``max|g''''| L^4 / 384``) this proves, for most
+segments in one vectorised test, that no event and no new peak can occur inside; the few that
+remain are bisected (:func:`first_root`, :func:`max_abs`).
+"""
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import eig, lu_factor, lu_solve
+
+GAUSS_POINTS = 10
+_GX, _GW = np.polynomial.legendre.leggauss(GAUSS_POINTS)
+GAUSS_NODES = 0.5 * (_GX + 1.0)    # on [0, 1]
+GAUSS_WEIGHTS = 0.5 * _GW
+CHUNK_RATE = 2.0                   # chunk length <= CHUNK_RATE / max|lam|, see module docstring
+MAX_CONDITION = 1e8                # refuse an eigenvector basis that would cost more than 8 digits
+PEAK_RTOL = 1e-9                   # relative accuracy to which in-step peak values are established
+ROUNDOFF = 1e-12                   # relative round-off of a modal evaluation (cond(V) eps, with margin)
+MAX_CHUNKS = 4096                  # bound on one segment's quadrature work
+_SERIES_RADIUS = 0.25              # phi functions by series inside this radius
+_SERIES_TERMS = 14                 # 0.25^14 / 14! ~ 3e-20
+
+
+def phi_functions(x, second: bool = True):
+    """``(e^x, phi1(x), phi2(x))`` of a complex array, accurate for every x.
+
+    ``phi1 = expm1(x) / x`` (numpy's complex expm1 is accurate to a few ulp near 0; 1 at 0);
+    ``phi2`` by its series inside ``|x| < 0.25`` and its closed form outside.  With
+    ``second=False`` phi2 is not computed (None): a segment without a ramp of the ground
+    acceleration multiplies it by zero.
+    """
+    x = np.asarray(x, dtype=complex)
+    e = np.exp(x)
+    zero = x == 0.0
+    if zero.any():
+        phi1 = np.expm1(x) / np.where(zero, 1.0, x)
+        phi1[zero] = 1.0
+    else:
+        phi1 = np.expm1(x) / x
+    if not second:
+        return e, phi1, None
+    mag = np.abs(x)
+    small = mag < _SERIES_RADIUS
+    safe = np.where(small, 1.0, x)
+    phi2 = (e - 1.0 - x) / (safe * safe)
+    if small.any():
+        xs = x[small]
+        # Horner for sum x^k/(k+2)!, as many terms as the largest |x| needs for a truncation
+        # error below 1e-17 (at most _SERIES_TERMS for |x| < 0.25)
+        r = float(mag[small].max())
+        terms = next((k for k in range(2, _SERIES_TERMS + 1) if r ** (k + 1) / _FACTORIALS[k + 1] < 1e-17),
+                     _SERIES_TERMS)
+        p2 = np.full_like(xs, _INV_FACTORIALS[terms + 2])
+        for k in range(terms - 1, -1, -1):
+            p2 = p2 * xs + _INV_FACTORIALS[k + 2]
+        phi2[small] = p2
+    return e, phi1, phi2
+
+
+_FACTORIALS = [float(math.factorial(k)) for k in range(_SERIES_TERMS + 3)]
+_INV_FACTORIALS = [1.0 / f for f in _FACTORIALS]
+
+
+def hermite_range(g0, g1, d0, d1):
+    """Min and max over [0, 1] of the cubic Hermite ``H`` with ``H(0)=g0, H(1)=g1, H'(0)=d0, H'(1)=d1``.
+
+    Vectorised over arrays of equal shape (``d`` are slopes per unit of the normalised time,
+    i.e. ``L g'``).
+    """
+    a = 3.0 * (g1 - g0) - 2.0 * d0 - d1          # H = g0 + d0 t + a t^2 + b t^3
+    b = 2.0 * (g0 - g1) + d0 + d1
+    lo = np.minimum(g0, g1)
+    hi = np.maximum(g0, g1)
+    # H'(t) = d0 + 2 a t + 3 b t^2 = 0; with b ~ 0 the linear root -d0 / (2 a)
+    qa, qb = 3.0 * b, 2.0 * a
+    disc = qb * qb - 4.0 * qa * d0
+    sq = np.sqrt(np.abs(disc))
+    quad = np.abs(qa) > 1e-14 * (np.abs(qb) + np.abs(d0)) + 1e-300
+    den = np.where(quad, 2.0 * qa, 1.0)
+    lin = np.where(qb != 0.0, -d0 / np.where(qb != 0.0, qb, 1.0), -1.0)
+    for r in (np.where(quad, (-qb - sq) / den, lin), np.where(quad, (-qb + sq) / den, lin)):
+        ok = (disc >= 0.0) & (r > 0.0) & (r < 1.0)
+        rr = np.where(ok, r, 0.0)
+        h = g0 + rr * (d0 + rr * (a + rr * b))
+        lo = np.where(ok, np.minimum(lo, h), lo)
+        hi = np.where(ok, np.maximum(hi, h), hi)
+    return lo, hi
+
+
+def hermite_range_scalar(g0: float, g1: float, d0: float, d1: float) -> tuple[float, float]:
+    """:func:`hermite_range` for floats (the bisection searches call it many times)."""
+    a = 3.0 * (g1 - g0) - 2.0 * d0 - d1
+    b = 2.0 * (g0 - g1) + d0 + d1
+    lo, hi = min(g0, g1), max(g0, g1)
+    qa, qb = 3.0 * b, 2.0 * a
+    roots = ()
+    if abs(qa) > 1e-14 * (abs(qb) + abs(d0)) + 1e-300:
+        disc = qb * qb - 4.0 * qa * d0
+        if disc >= 0.0:
+            sq = math.sqrt(disc)
+            roots = ((-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa))
+    elif qb != 0.0:
+        roots = (-d0 / qb,)
+    for r in roots:
+        if 0.0 < r < 1.0:
+            h = g0 + r * (d0 + r * (a + r * b))
+            lo, hi = min(lo, h), max(hi, h)
+    return lo, hi
+
+
+def bracketed_newton(f, a: float, b: float, fa: float, fb: float, xtol: float,
+                     guess: float | None = None, max_iter: int = 100) -> tuple[float, float]:
+    """Root of ``f`` (returning ``(value, derivative)``) in ``[a, b]`` with ``fa * fb < 0``.
+
+    Newton's method kept inside the bracket (bisection when a step leaves it or converges
+    slowly).  Returns the final bracket ``(x_a_side, x_b_side)``, narrower than ``xtol``: the
+    second end has the sign of ``fb``.
+    """
+    x = 0.5 * (a + b) if guess is None or not (a < guess < b) else guess
+    for _ in range(max_iter):
+        if b - a <= xtol:
+            break
+        fx, dfx = f(x)
+        if fx == 0.0:
+            return x, x
+        if (fx < 0.0) == (fa < 0.0):
+            a, fa = x, fx
+        else:
+            b, fb = x, fx
+        step = fx / dfx if dfx != 0.0 else math.inf
+        nxt = x - step
+        if not (a < nxt < b) or abs(step) > 0.5 * (b - a):
+            nxt = 0.5 * (a + b)
+        elif abs(step) < 0.5 * xtol:
+            # converged: probe just across, so that the bracket closes below xtol
+            nxt = min(max(x - step + math.copysign(0.5 * xtol, -step if step else 1.0), a), b)
+            if not (a < nxt < b):
+                nxt = 0.5 * (a + b)
+        x = nxt
+    return a, b
+
+
+@dataclass(frozen=True)
+class SegmentMap:
+    """Real matrices of one configuration and one segment length ``L`` (s).
+
+    ``y = [z0; w]`` with ``w = [ag0, ag1, p]``:  ``z(L) = state @ y``, the watched functions at
+    the start ``watch_rows @ z0 = start @ y``, the segment's :class:`Scan` vector ``= scan @ y``
+    (it ends with ``Re, Im (W z'(0))``), ``int_0^L v' C v ds = y' damping @ y``,
+    ``-int_0^L (1'M v) ag ds = y' input @ y``.  ``stacked`` is ``[state; start; scan; damping;
+    input]`` so that one matrix-vector product gives everything a segment needs.
+    ``change``/``ramp_change``: see :meth:`Configuration.change_bounds`.
+    """
+
+    length: float
+    state: np.ndarray
+    scan: np.ndarray
+    damping: np.ndarray
+    input: np.ndarray
+    stacked: np.ndarray
+    change: np.ndarray
+    ramp_change: np.ndarray
+
+
+class Configuration:
+    """One linear stiffness configuration of a shear building (see module docstring).
+
+    Parameters
+    ----------
+    masses : (n,) floor masses (kg)
+    damping_matrix : (n, n) viscous damping matrix C (N s/m)
+    tangent : (n,) storey tangent stiffnesses (N/m), >= 0
+    max_maps : bound of the cache of :class:`SegmentMap` by length
+    """
+
+    def __init__(self, masses, damping_matrix, tangent, max_maps: int = 64):
+        m = np.asarray(masses, dtype=float)
+        n = m.size
+        kt = np.asarray(tangent, dtype=float)
+        self.n = n
+        self.masses = m
+        self.C = np.asarray(damping_matrix, dtype=float)
+        self.tangent = kt
+        above = np.append(kt[1:], 0.0)
+        self.K = np.diag(kt + above) - np.diag(kt[1:], 1) - np.diag(kt[1:], -1)
+        A = np.zeros((2 * n, 2 * n))
+        A[:n, n:] = np.eye(n)
+        A[n:, :n] = -self.K / m[:, None]
+        A[n:, n:] = -self.C / m[:, None]
+        self.A = A
+        lam, V = eig(A)
+        cond = np.linalg.cond(V)
+        if not (math.isfinite(cond) and cond <= MAX_CONDITION):
+            raise ValueError(
+                f"the storey stiffness configuration {kt.tolist()} N/m gives a defective or nearly "
+                f"defective state matrix (eigenvector condition {cond:.3g} > {MAX_CONDITION:g}); "
+                f"an undamped mechanism (zeta = 0 with alpha = 0) has this: give zeta > 0 or alpha > 0")
+        self.lam = lam
+        self.V = V
+        self.W = lu_solve(lu_factor(V), np.eye(2 * n, dtype=complex))
+        self.lam_abs = np.abs(lam)
+        self.lam2 = self.lam_abs ** 2
+        self.lam3 = self.lam_abs ** 3
+        self.lam4 = self.lam_abs ** 4
+        self.rate = float(np.max(self.lam_abs)) if n else 0.0
+        self.growth_rate = max(0.0, float(np.max(lam.real)))   # > 0 only by round-off
+        # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w.
+        B0 = np.zeros((2 * n, n + 2))
+        B0[n:, 0] = -1.0
+        B0[n:, 2:] = np.diag(1.0 / m)
+        B1 = np.zeros((2 * n, n + 2))
+        B1[n:, 1] = -1.0
+        self.B0, self.B1 = B0, B1
+        self.WB0 = self.W @ B0
+        self.WB1 = self.W @ B1
+        self.ramp_abs = np.abs(self.WB1[:, 1])      # |modal b1| per unit ground-acceleration slope
+        # Functionals whose peaks are tracked: floor displacement, storey drift, absolute
+        # acceleration a = M^-1 (p - C v - Kt u) (its constant part p/m added by the caller).
+        D = np.eye(n) - np.eye(n, k=-1)
+        F = np.zeros((3 * n, 2 * n))
+        F[:n, :n] = np.eye(n)
+        F[n:2 * n, :n] = D
+        F[2 * n:, :] = A[n:, :]
+        self.peak_rows = F
+        # Rows watched by the cheap per-segment test: the tracked functions and the drift rates.
+        watch = np.zeros((4 * n, 2 * n))
+        watch[:3 * n] = F
+        watch[3 * n:, n:] = D
+        self.watch_rows = watch
+        self.peak_modal = F @ V
+        self.peak_modal_abs = np.abs(self.peak_modal)
+        self._maps: OrderedDict[float, SegmentMap] = OrderedDict()
+        self._exact: dict[float, SegmentMap] = {}      # the same maps by the exact length asked
+        self.max_maps = int(max_maps)
+        self.maps_built = 0          # cost counter
+
+    # -- evaluation -------------------------------------------------------------------------
+    def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
+        """``b(s) = B0 w + B1 w s`` (state-space forcing at segment time s)."""
+        return self.B0 @ w + (self.B1 @ w) * s
+
+    def rate_of(self, z: np.ndarray, w: np.ndarray, s: float = 0.0) -> np.ndarray:
+        """``z'(s) = A z + b(s)``."""
+        return self.A @ z + self.forcing(w, s)
+
+    def modal(self, z0: np.ndarray, w: np.ndarray):
+        """Modal coordinates of a segment start: ``q0, beta0, beta1``."""
+        return self.W @ z0, self.WB0 @ w, self.WB1 @ w
+
+    def modal_at(self, q0, beta0, beta1, s):
+        """``q(s)`` (complex, shape ``(2n,) + shape(s)``) for segment time(s) s."""
+        s = np.asarray(s, dtype=float)
+        x = np.multiply.outer(self.lam, s)
+        ramp = bool(beta1.any())
+        e, p1, p2 = phi_functions(x, second=ramp)
+        if s.ndim == 0:
+            q = e * q0 + s * p1 * beta0
+            return q + s * s * p2 * beta1 if ramp else q
+        q = e * q0[:, None] + s * p1 * beta0[:, None]
+        return q + s * s * p2 * beta1[:, None] if ramp else q
+
+    def state_at(self, q0, beta0, beta1, s):
+        """Real state ``z(s)``."""
+        return (self.V @ self.modal_at(q0, beta0, beta1, s)).real
+
+    def chunk_nodes(self, length: float):
+        """Gauss-Legendre nodes and weights on ``[0, length]`` (chunked by the fastest mode)."""
+        chunks = max(1, int(math.ceil(self.rate * length / CHUNK_RATE)))
+        if chunks > MAX_CHUNKS:
+            raise ValueError(f"segment of {length:.6g} s spans {chunks} quadrature chunks of the fastest "
+                             f"mode (|lambda| = {self.rate:.6g} 1/s); the limit is {MAX_CHUNKS}: use shorter steps")
+        width = length / chunks
+        starts = width * np.arange(chunks)
+        nodes = (starts[:, None] + width * GAUSS_NODES[None, :]).ravel()
+        weights = np.tile(width * GAUSS_WEIGHTS, chunks)
+        return nodes, weights
+
+    def energies(self, q0, beta0, beta1, w: np.ndarray, length: float):
+        """``(int_0^L v'Cv ds, -int_0^L (1'M v) ag ds)`` of a segment from its modal start."""
+        nodes, weights = self.chunk_nodes(length)
+        n = self.n
+        v = (self.V[n:] @ self.modal_at(q0, beta0, beta1, nodes)).real      # (n, K)
+        damping = float(np.einsum("k,ik,ik->", weights, v, self.C @ v))
+        ag = w[0] + w[1] * nodes
+        work = -float((weights * ag) @ (self.masses @ v))
+        return damping, work
+
+    def segment_map(self, length: float) -> SegmentMap:
+        """Real matrices of a segment of this length, cached (see :class:`SegmentMap`)."""
+        found = self._exact.get(length)
+        if found is not None:
+            return found
+        key = float(f"{length:.12g}")   # equal lengths that differ by time round-off share a map
+        found = self._maps.get(key)
+        if found is not None:
+            if len(self._exact) >= 4 * self.max_maps:
+                self._exact.clear()
+            self._exact[length] = found
+            return found
+        length = float(length)
+        n = self.n
+        size = 3 * n + 2
+        # Modal map of y = [z0; w]: q(s) = E(s) [W z0] + s phi1 [WB0 w] + s^2 phi2 [WB1 w].
+        Wy = np.hstack([self.W, np.zeros((2 * n, n + 2))])
+        B0y = np.hstack([np.zeros((2 * n, 2 * n)), self.WB0])
+        B1y = np.hstack([np.zeros((2 * n, 2 * n)), self.WB1])
+
+        def real_map(s):
+            e, p1, p2 = phi_functions(self.lam * s)
+            return (self.V @ (e[:, None] * Wy + (s * p1)[:, None] * B0y + (s * s * p2)[:, None] * B1y)).real
+
+        state = real_map(length)
+        scan = self.scan_rows(state, length)
+        nodes, weights = self.chunk_nodes(length)
+        x = np.multiply.outer(self.lam, nodes)
+        e, p1, p2 = phi_functions(x)                                          # (2n, K)
+        modal = (e[:, :, None] * Wy[:, None, :] + (nodes * p1)[:, :, None] * B0y[:, None, :]
+                 + (nodes * nodes * p2)[:, :, None] * B1y[:, None, :])        # (2n, K, size)
+        vel = np.einsum("ij,jks->kis", self.V[n:], modal).real                 # (K, n, size)
+        damping = np.einsum("k,kis,ij,kjt->st", weights, vel, self.C, vel)
+        mv = np.einsum("i,kis->ks", self.masses, vel)                          # (K, size)
+        ag_row = np.zeros((nodes.size, size))
+        ag_row[:, 2 * n] = 1.0
+        ag_row[:, 2 * n + 1] = nodes
+        work = -np.einsum("k,ks,kt->st", weights, mv, ag_row)
+        damping = 0.5 * (damping + damping.T)
+        work = 0.5 * (work + work.T)
+        start = np.hstack([self.watch_rows, np.zeros((4 * n, n + 2))])
+        stacked = np.ascontiguousarray(np.vstack([state, start, scan, damping, work]))
+        change, ramp_change = self.change_bounds(length)
+        result = SegmentMap(length, state, scan, damping, work, stacked, change, ramp_change)
+        if len(self._maps) >= self.max_maps:
+            self._maps.popitem(last=False)
+            self._exact.clear()
+        self._maps[key] = result
+        self._exact[length] = result
+        self.maps_built += 1
+        return result
+
+    def change_bounds(self, length: float):
+        """``(N, R)`` with ``|g(t) - g(0)| <= N @ [|Re W z'(0)|; |Im W z'(0)|] + R |ag1|`` for
+        ``t`` in ``[0, L]`` and every watched function ``g = watch_rows @ z``.
+
+        In modal coordinates ``q(t) - q(0) = t phi1(lam t) q'(0) + t^2 phi2(lam t) beta1``; for
+        ``Re lam <= 0``, ``|t phi1(lam t)| = |e^{lam t} - 1| / |lam| <= min(t, 2 / |lam|)`` and
+        ``|phi2| <= 1/2`` (``phi2(x) = int_0^1 (1 - s) e^{x s} ds``), so the bound is closed-form
+        and rigorous (times ``e^{max(Re lam, 0) L}`` for round-off growth).  Used only to skip
+        work: a segment whose bound leaves every function inside its limits cannot have an
+        event or a new peak.
+        """
+        FV = np.abs(self.watch_rows @ self.V)                                   # (4n, 2n)
+        with np.errstate(divide="ignore"):
+            reach = np.minimum(length, np.where(self.lam_abs > 0.0, 2.0 / self.lam_abs, np.inf))
+        growth = math.exp(self.growth_rate * length)
+        change = FV * (reach * growth)[None, :]
+        ramp_change = FV @ (0.5 * length * length * growth * self.ramp_abs)
+        # acting on [|Re q'(0)|; |Im q'(0)|] (their sum bounds |q'(0)|): no square root per step
+        return np.ascontiguousarray(np.hstack([change, change])), ramp_change
+
+    def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
+        """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
+        n = self.n
+        size = 3 * n + 2
+        A, F = self.A, self.peak_rows
+        Y0 = np.zeros((2 * n, size))
+        Y0[:, :2 * n] = np.eye(2 * n)
+        B0y = np.zeros((2 * n, size))
+        B0y[:, 2 * n:] = self.B0
+        B1y = np.zeros((2 * n, size))
+        B1y[:, 2 * n:] = self.B1
+        D0 = A @ Y0 + B0y
+        D1 = A @ state_map + B0y + B1y * length
+        WD0 = self.W @ D0
+        return np.vstack([F @ Y0, F @ state_map, F @ D0, F @ D1, F @ (A @ D0 + B1y), F @ (A @ D1 + B1y),
+                          WD0.real, WD0.imag])
+
+    def scan_vector(self, z0: np.ndarray, z1: np.ndarray, w: np.ndarray, length: float) -> np.ndarray:
+        """A segment's :class:`Scan` vector from its end states (the ad hoc path)."""
+        b0 = self.B0 @ w
+        b1 = self.B1 @ w
+        A = self.A
+        d0 = A @ z0 + b0
+        d1 = A @ z1 + b0 + b1 * length
+        Z = np.empty((2 * self.n, 6))
+        Z[:, 0] = z0
+        Z[:, 1] = z1
+        Z[:, 2] = d0
+        Z[:, 3] = d1
+        Z[:, 4] = A @ d0 + b1
+        Z[:, 5] = A @ d1 + b1
+        wd0 = self.W @ d0
+        return np.concatenate([(self.peak_rows @ Z).T.ravel(), wd0.real, wd0.imag])
+
+    # -- bounds -------------------------------------------------------------------------------
+    def derivative_bound(self, modal_rows_abs: np.ndarray, order: int, rate0: np.ndarray,
+                         beta1: np.ndarray, length: float) -> np.ndarray:
+        """Bound of ``|c' z^(order)(s)|`` over ``[a, a + length]``, ``order >= 2``, for every row.
+
+        ``modal_rows_abs`` = ``|c' V|`` per row, ``rate0`` = modal ``z'(a)`` (``W z'(a)``),
+        ``beta1`` the segment's modal ramp forcing.
+        """
+        lam = np.abs(self.lam)
+        amp = (np.abs(rate0) + length * np.abs(beta1)) * math.exp(self.growth_rate * length)
+        return modal_rows_abs @ (lam ** (order - 1) * amp + lam ** (order - 2) * np.abs(beta1))
+
+
+class Scan:
+    """What the event and peak tests need of one segment ``[0, L]``, from one product.
+
+    For every tracked function ``g = F z`` (rows of :attr:`Configuration.peak_rows`: floor
+    displacements, storey drifts, absolute accelerations without their constant part) its
+    values, slopes and curvatures at both ends (columns of ``G``: ``g(0), g(L), g'(0), g'(L),
+    g''(0), g''(L)``), and bounds of ``|g|`` and ``|g'|`` over the segment
+    (columns of ``B``, from the modal amplitudes of ``z'(0)``, see
+    :meth:`Configuration.derivative_bound`).
+    """
+
+    __slots__ = ("G", "B")
+
+    def __init__(self, cfg: "Configuration", vector: np.ndarray, ag_slope: float, length: float):
+        m = cfg.peak_rows.shape[0]
+        two_n = 2 * cfg.n
+        self.G = vector[:6 * m].reshape(6, m).T
+        re = vector[6 * m:6 * m + two_n]
+        im = vector[6 * m + two_n:]
+        amp = np.sqrt(re * re + im * im)
+        lam = cfg.lam_abs
+        if ag_slope != 0.0:
+            ramp = abs(ag_slope) * cfg.ramp_abs
+            amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
+            powers = np.empty((two_n, 2))
+            powers[:, 0] = cfg.lam3 * amp + cfg.lam2 * ramp
+            powers[:, 1] = cfg.lam4 * amp + cfg.lam3 * ramp
+        else:
+            if cfg.growth_rate:
+                amp = amp * math.exp(cfg.growth_rate * length)
+            powers = np.empty((two_n, 2))
+            powers[:, 0] = cfg.lam3 * amp
+            powers[:, 1] = cfg.lam4 * amp
+        self.B = cfg.peak_modal_abs @ powers
+
+
+class ModalSegment:
+    """One segment of one configuration from a known start, evaluated anywhere in ``[0, L]``.
+
+    Used by the event and peak searches: ``derivatives(c_modal, s, count)`` returns
+    ``c' z^(j)(s)`` for ``j = 0 .. count-1`` (real), from the modal solution.
+    """
+
+    __slots__ = ("cfg", "q0", "beta0", "beta1", "_memo")
+
+    def __init__(self, cfg: Configuration, z0: np.ndarray, w: np.ndarray):
+        self.cfg = cfg
+        self.q0, self.beta0, self.beta1 = cfg.modal(z0, w)
+        self._memo: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+
+    def modal_derivatives(self, s: float):
+        """``(q(s), q'(s))`` in modal coordinates (memoised by s)."""
+        hit = self._memo.get(s)
+        if hit is None:
+            q = self.cfg.modal_at(self.q0, self.beta0, self.beta1, s)
+            dq = self.cfg.lam * q + self.beta0 + self.beta1 * s
+            hit = self._memo[s] = (q, dq)
+        return hit
+
+    def derivatives(self, c_modal: np.ndarray, s: float, count: int) -> list[float]:
+        """``[c'z, c'z', c'z'', ...]`` (``count`` values) at segment time s."""
+        q, dq = self.modal_derivatives(s)
+        lam = self.cfg.lam
+        out = [float((c_modal @ q).real)]
+        if count > 1:
+            out.append(float((c_modal @ dq).real))
+        term = dq
+        for j in range(2, count):
+            # q^(j) = lam^(j-1) q' + lam^(j-2) beta1
+            term = lam * term + (self.beta1 if j == 2 else 0.0)
+            out.append(float((c_modal @ term).real))
+        return out
+
+    def magnitudes(self, c_modal_abs: np.ndarray, s: float, count: int) -> list[float]:
+        """``sum |c_j| |q_j^(k)(s)|`` for ``k = 0 .. count-1``: the scale of each derivative's
+        round-off."""
+        q, dq = self.modal_derivatives(s)
+        lam = self.cfg.lam
+        out = [float(c_modal_abs @ np.abs(q))]
+        term = dq
+        for j in range(1, count):
+            if j >= 2:
+                term = lam * term + (self.beta1 if j == 2 else 0.0)
+            out.append(float(c_modal_abs @ np.abs(term)))
+        return out
+
+    def seed(self, s: float, q, dq) -> None:
+        """Store ``q'(s)`` (and ``q(s)`` if given) computed elsewhere (vectorised sampling)."""
+        if s not in self._memo:
+            if q is None:
+                q = (dq - self.beta0 - self.beta1 * s) / np.where(self.cfg.lam != 0.0, self.cfg.lam, 1.0)
+                if np.any(self.cfg.lam == 0.0):
+                    return      # q cannot be recovered from q' for a zero eigenvalue: evaluate later
+            self._memo[s] = (q, dq)
+
+    def bound(self, c_modal_abs: np.ndarray, order: int, s: float, length: float) -> float:
+        """Bound of ``|c' z^(order)|`` over ``[s, s + length]`` (``order >= 2``)."""
+        _, dq = self.modal_derivatives(s)
+        return float(self.cfg.derivative_bound(c_modal_abs, order, dq, self.beta1, length))
+
+    def bounds45(self, c_modal_abs: np.ndarray, s: float, length: float) -> tuple[float, float]:
+        """Bounds of ``|c' z''''|`` and ``|c' z'''''|`` over ``[s, s + length]``."""
+        _, dq = self.modal_derivatives(s)
+        cfg = self.cfg
+        ramp = np.abs(self.beta1)
+        amp = (np.abs(dq) + length * ramp) * math.exp(cfg.growth_rate * length)
+        b4 = float(c_modal_abs @ (cfg.lam3 * amp + cfg.lam2 * ramp))
+        b5 = float(c_modal_abs @ (cfg.lam4 * amp + cfg.lam3 * ramp))
+        return b4, b5
+
+
+def _cubic_lower_bound_positive(g0: float, g1: float, g2: float, bound3: float, length: float) -> bool:
+    """True if ``g0 + g1 s + g2 s^2/2 - bound3 s^3/6 > 0`` for every s in (0, length]."""
+    if g0 < 0.0 or (g0 == 0.0 and (g1 < 0.0 or (g1 == 0.0 and g2 <= 0.0))):
+        return False
+    # P'(s) = g1 + g2 s - bound3 s^2 / 2: check P at the end and at interior critical points.
+    candidates = [length]
+    if bound3 > 0.0:
+        disc = g2 * g2 + 2.0 * bound3 * g1
+        if disc >= 0.0:
+            r = math.sqrt(disc)
+            candidates += [(g2 - r) / bound3, (g2 + r) / bound3]
+    elif g2 != 0.0:
+        candidates.append(-g1 / g2)
+    for s in candidates:
+        if 0.0 < s <= length and g0 + s * (g1 + s * (0.5 * g2 - s * bound3 / 6.0)) <= 0.0:
+            return False
+    return True
+
+
+def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset: float,
+               length: float, xtol: float, min_width: float, budget: int = 200) -> float | None:
+    """First s in [0, length] where ``g = c' z^(order) + offset`` reaches 0 from above, or None.
+
+    ``g`` should be >= 0 at s = 0; it may start at 0 (a storey that has just switched sits at
+    its limit): values and slopes at the start within round-off of zero (``ROUNDOFF`` times
+    the modal magnitude of the term) count as zero, and the sign of the first derivative that
+    is not zero says whether ``g`` leaves at once (root 0) or moves inward.  A start clearly
+    below zero is a root at 0.  Sub-intervals are excluded by a cubic Hermite bound and by a
+    Taylor bound from their left end; the rest are bisected (``budget`` evaluations at most); a
+    sign change is refined by bracketed Newton to ``xtol``.  The time returned is on or past
+    the crossing (``g <= 0`` there): the state handed to the next law lies on the new side, or
+    the switch would be undone at once.  A touch without crossing narrower than ``min_width``
+    is not a root (a graze).
+    """
+    c_abs = np.abs(c_modal)
+    start = segment.derivatives(c_modal, 0.0, order + 3)[order:]
+    scale = segment.magnitudes(c_abs, 0.0, order + 3)[order:]
+    tol = [ROUNDOFF * m for m in scale]
+    tol[0] += ROUNDOFF * abs(offset)
+    g0 = start[0] + offset
+    if g0 < -tol[0]:
+        return 0.0
+    if abs(g0) <= tol[0]:
+        offset -= g0                          # exactly at the limit
+        g1 = start[1] if abs(start[1]) > tol[1] else 0.0
+        g2 = start[2] if abs(start[2]) > tol[2] else 0.0
+        if g1 < 0.0 or (g1 == 0.0 and g2 < 0.0):
+            return 0.0                        # leaves at once
+        first = [0.0, g1, g2]
+    else:
+        first = [g0, start[1], start[2]]
+
+    def at(s):
+        d = segment.derivatives(c_modal, s, order + 3)[order:]
+        d[0] += offset
+        return d
+
+    stack = [(0.0, length)]
+    values = {0.0: first}
+    evaluations = 1
+    while stack:
+        a, b = stack.pop()
+        va = values[a]
+        vb = values.get(b)
+        if vb is None:
+            vb = values[b] = at(b)
+            evaluations += 1
+        width = b - a
+        if vb[0] < 0.0 and va[0] > 0.0:
+            lo, hi = bracketed_newton(lambda s: tuple(at(s)[:2]), a, b, va[0], vb[0], xtol)
+            return hi
+        if vb[0] >= 0.0:
+            b4 = segment.bound(c_abs, order + 4, a, width)
+            lo, _ = hermite_range_scalar(va[0], vb[0], width * va[1], width * vb[1])
+            if va[0] > 0.0 and lo - b4 * width ** 4 / 384.0 > 0.0:
+                continue
+            b3 = segment.bound(c_abs, order + 3, a, width)
+            if _cubic_lower_bound_positive(va[0], va[1], va[2], b3, width):
+                continue
+            if width < min_width or evaluations >= budget:
+                continue           # a graze narrower than the resolution, or out of budget
+        elif width < min_width:
+            return b               # from exactly 0 (moving inward) to below 0 within xtol
+        mid = 0.5 * (a + b)
+        values[mid] = at(mid)
+        evaluations += 1
+        stack.append((mid, b))
+        stack.append((a, mid))  # left half first (LIFO)
+    return None
+
+
+def max_abs(segment: "ModalSegment", c_modal: np.ndarray, offset: float, length: float,
+            known: float, xtol: float, min_width: float, budget: int = 200,
+            rtol: float = PEAK_RTOL, atol: float = 0.0) -> tuple[float, float]:
+    """``(max |g|, where)`` over [0, length] of ``g = c' z + offset`` if it exceeds ``known``.
+
+    Branch and bound: a sub-interval whose Hermite bound on ``|g|`` stays at or below the best
+    value found (plus ``rtol`` of it and ``atol``: the peak is then known to that accuracy), or
+    on which ``g'`` provably keeps its sign (the extremes are then at its ends, already
+    counted), is dropped; a sign change of ``g'`` is refined by bracketed Newton from the
+    Hermite estimate, and the neighbourhood of that extremum in which the Taylor bound
+    ``|g(t*)| - |g''(t*)| r^2 / 2 + B3 r^3 / 6`` (B3 bounds the third derivative) stays below
+    ``|g(t*)|`` is dropped too.  Returns ``(known, -1.0)`` when nothing exceeds ``known``.
+    ``xtol`` (s) is the tolerance of the extremum's time: the value's error is of the order of
+    ``|g''| xtol^2``.
+    """
+    c_abs = np.abs(c_modal)
+
+    def at(s):
+        d = segment.derivatives(c_modal, s, 3)
+        d[0] += offset
+        return d
+
+    values = {0.0: at(0.0), length: at(length)}
+    best, where = known, -1.0
+    for s in (0.0, length):
+        if abs(values[s][0]) > best:
+            best, where = abs(values[s][0]), s
+    stack = [(0.0, length)]
+    evaluations = 2
+    while stack and evaluations < budget:
+        a, b = stack.pop()
+        va, vb = values[a], values[b]
+        width = b - a
+        w4 = width ** 4 / 384.0
+        lo, hi = hermite_range_scalar(va[0], vb[0], width * va[1], width * vb[1])
+        b45 = segment.bounds45(c_abs, a, width)
+        if max(-lo, hi) + b45[0] * w4 <= best * (1.0 + rtol) + atol:
+            continue
+        dlo, dhi = hermite_range_scalar(va[1], vb[1], width * va[2], width * vb[2])
+        err = b45[1] * w4
+        if dlo - err > 0.0 or dhi + err < 0.0:
+            continue                 # monotonic: its extremes are the ends
+        if width < min_width:
+            continue
+        if va[1] * vb[1] < 0.0:
+            lo_, hi_ = bracketed_newton(lambda s: tuple(at(s)[1:3]), a, b, va[1], vb[1], xtol,
+                                        guess=a + width * va[1] / (va[1] - vb[1]))
+            t = 0.5 * (lo_ + hi_)
+        else:
+            t = 0.5 * (a + b)
+        if not (a < t < b):
+            t = 0.5 * (a + b)
+        vt = values[t] = at(t)
+        evaluations += 1
+        if abs(vt[0]) > best:
+            best, where = abs(vt[0]), t
+        radius = 0.0
+        if vt[0] * vt[2] < 0.0:
+            # a local maximum of |g| near t: |g(t + r)| <= |g(t)| + |g'(t)| r - |g''(t)| r^2 / 2
+            # + B3 r^3 / 6 stays <= |g(t)| while |g'| + B3 r^2 / 6 <= |g''| r / 2
+            b3 = segment.bound(c_abs, 3, a, width)
+            g1_, g2_ = abs(vt[1]), abs(vt[2])
+            disc = 0.25 * g2_ * g2_ - 4.0 * (b3 / 6.0) * g1_
+            if b3 > 0.0 and disc >= 0.0:
+                radius = (0.5 * g2_ + math.sqrt(disc)) / (2.0 * b3 / 6.0)
+            radius = min(radius, width)
+        for lo_end, hi_end in ((t + radius, b), (a, t - radius)):   # left part popped first
+            if hi_end - lo_end <= 0.0:
+                continue
+            for end in (lo_end, hi_end):
+                if end not in values:
+                    values[end] = at(end)
+                    evaluations += 1
+            stack.append((lo_end, hi_end))
+    return best, where
