@@ -32,6 +32,7 @@ class PlainContact:
         self.counted = False
         self.onset_offset = 0.0     # s: a contact is found at the start of a step
         self.impact_peak = 0.0      # N, largest force of the current/latest contact
+        self.peak_steps = 0.0       # s from the onset to the step start where impact_peak was found
         self.F_max = 0.0
         self.delta_max = 0.0
         self.impact_time = 0.0
@@ -60,9 +61,11 @@ class PlainContact:
             if not self.counted and self.delta_max >= self.graze_depth:
                 self.counted = True
                 self.impacts += 1
-            self.impact_time += h
             self.F = self.law.force(delta, delta_dot, self.v_imp)
-            self.impact_peak = max(self.impact_peak, self.F)
+            if self.F > self.impact_peak:
+                self.impact_peak = self.F
+                self.peak_steps = self.impact_time
+            self.impact_time += h
         else:
             if self.in_contact:
                 self.in_contact = False
@@ -74,6 +77,10 @@ class PlainContact:
             self.F = 0.0
         self.F_max = max(self.F_max, self.F)
         return self.F
+
+    def peak_delay(self) -> float:
+        """Time (s) from the onset of the latest contact to its largest force (a step start)."""
+        return self.peak_steps
 
     def dissipated_energy(self) -> float:
         """Work done on the contact minus the elastic energy stored at the latest inputs [J]."""

@@ -87,6 +87,8 @@ class Pounding(Fmi2Slave):
                  description="time at which the latest contact began"),
         Variable("F_peak", start=0.0, unit="N", **_OUT,
                  description="largest instantaneous force of the latest contact (so far, while in progress)"),
+        Variable("t_peak", start=0.0, unit="s", **_OUT,
+                 description="time of F_peak (resolved mode: located to an internal step; plain mode: a step start)"),
         Variable("v_impact", start=0.0, unit="m/s", **_OUT,
                  description="approach speed of the latest impact (latched at contact onset)"),
         Variable("CR_achieved", start=0.0, unit="1", **_OUT,
@@ -147,6 +149,7 @@ class Pounding(Fmi2Slave):
         if c.started != started:
             self.t_onset = current_time + c.onset_offset
         self.F_peak = c.impact_peak
+        self.t_peak = self.t_onset + c.peak_delay()
         self.v_impact = c.v_imp
         self.delta_max = c.delta_max
         self.contact_time = c.impact_time

@@ -137,6 +137,10 @@ class ImpactResolver:
         self.ended = 0              # contacts completed (impacts and grazes)
         self.counted = False        # the current/latest contact is counted as an impact
         self.onset_offset = 0.0     # s into its step at which the latest contact began
+        self.peak_tau = 0.0         # scaled time from the onset to impact_peak
+        #: None, or a list that receives (contact number, s since its onset, force N, penetration m)
+        #: at every accepted internal point: a contact's own trajectory (the master's replays)
+        self.trace = None
         self.E_completed = 0.0      # J, all completed impacts
         self.F_max = 0.0            # N
         self.impact_peak = 0.0      # N, current/latest impact
@@ -152,6 +156,11 @@ class ImpactResolver:
         v = self.v_imp
         L = self.law.length_scale(v)
         return v, L, L / v, self.law.m * v * v / L
+
+    def peak_delay(self) -> float:
+        """Time (s) from the onset of the latest contact to its largest force (at the sample where
+        it was found, within one internal step of the refined peak)."""
+        return self.peak_tau * self._scales()[2] if self.v_imp > 0.0 else 0.0
 
     def dissipated_energy(self) -> float:
         """Energy dissipated by all impacts so far, the current one up to now [J]; never decreases."""
@@ -309,6 +318,7 @@ class ImpactResolver:
         self.started += 1
         self.counted = False
         self.impact_peak = 0.0
+        self.peak_tau = 0.0
         self.impact_time = 0.0
         self.delta_max = 0.0
         self._prev = ()
@@ -331,6 +341,8 @@ class ImpactResolver:
         if not self.counted:
             self.grazes += 1
         self.ended += 1
+        if self.trace is not None:        # the separation point (impact_time: the whole contact)
+            self.trace.append((self.started, self.impact_time, 0.0, d * L))
         self.in_contact = False
         self.just_separated = True
         self.last_CR = max(0.0, -u)
@@ -503,11 +515,15 @@ class ImpactResolver:
             p, n_ev = self._refine_peak(same[-1], tau - same[-1][0])
             peak, nfev = max(peak, p), nfev + n_ev
         self._prev = (prev + (sample,))[-2:]
+        if self.trace is not None:
+            _, L, T, _ = self._scales()
+            self.trace.append((self.started, tau * T, fs * F0, d * L))
         F = peak * F0
         if F > out.peak_force:
             out.peak_force = F
         if F > self.impact_peak:
             self.impact_peak = F
+            self.peak_tau = tau
         if F > self.F_max:
             self.F_max = F
         return nfev

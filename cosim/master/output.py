@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fmu_src.ground_records import G
+
 from ..files import replaced_folder
 from .names import column, element_name
 from .results import (IMPACT_COLUMNS, SimulationResult, Summary, energy_history, impact_table, impact_times,
@@ -31,6 +33,9 @@ def format_summary(summary: Summary) -> str:
         lines.append(f"  {name:<10} peak displacement {b.peak_displacement_m:.4g} m (floor "
                      f"{b.peak_displacement_floor}), peak drift {b.peak_drift_m:.4g} m "
                      f"(storey {b.peak_drift_storey})")
+        lines.append(f"  {'':<10} drift ratio {100 * b.peak_drift_ratio:.3g} % (storey "
+                     f"{b.peak_drift_ratio_storey}), floor acceleration {b.peak_acceleration_m_s2 / G:.3g} g "
+                     f"(floor {b.peak_acceleration_floor}){'' if b.peaks_in_step else ', at communication points'}")
     if s.contacts:
         grazes = f" (and {s.grazes} graze{'s' if s.grazes != 1 else ''}: contacts shallower than graze_depth)" \
             if s.grazes else ""

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
+from .impacts import contact_floor_accelerations
 from .names import column, element_name
 
 if TYPE_CHECKING:
@@ -125,7 +126,15 @@ class ContactSummary:
 
 @dataclass(frozen=True)
 class BuildingSummary:
-    """One building over a run: peak floor displacement (and where, when), peak drift, base shear."""
+    """One building over a run: peak floor displacement (and where, when), peak drift, drift ratio
+    and absolute floor acceleration (and where), base shear; per floor/storey lists of the peaks.
+
+    Peaks are located inside the steps when the building FMU reports its own running peaks
+    (``x_peak``, ``drift_peak``, ``a_peak``, ``drift_ratio_peak``; ``peaks_in_step`` True),
+    else taken at the communication points.  A floor that pounds also gets the contact's
+    contact force inside the steps (:func:`cosim.master.impacts.contact_floor_accelerations`):
+    the building's own peak sees only the force it held over each step.
+    """
 
     n_storeys: int
     peak_displacement_m: float
@@ -134,12 +143,27 @@ class BuildingSummary:
     peak_drift_m: float
     peak_drift_storey: int
     peak_base_shear_N: float
+    peak_drift_ratio: float = 0.0
+    peak_drift_ratio_storey: int = 1
+    peak_acceleration_m_s2: float = 0.0
+    peak_acceleration_floor: int = 1
+    peaks_in_step: bool = False
+    peak_displacements_m: tuple[float, ...] = ()
+    peak_drifts_m: tuple[float, ...] = ()
+    peak_drift_ratios: tuple[float, ...] = ()
+    peak_accelerations_m_s2: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return dict(n_storeys=self.n_storeys, peak_displacement_m=self.peak_displacement_m,
                     peak_displacement_floor=self.peak_displacement_floor,
                     peak_displacement_time_s=self.peak_displacement_time_s, peak_drift_m=self.peak_drift_m,
-                    peak_drift_storey=self.peak_drift_storey, peak_base_shear_N=self.peak_base_shear_N)
+                    peak_drift_storey=self.peak_drift_storey, peak_base_shear_N=self.peak_base_shear_N,
+                    peak_drift_ratio=self.peak_drift_ratio, peak_drift_ratio_storey=self.peak_drift_ratio_storey,
+                    peak_acceleration_m_s2=self.peak_acceleration_m_s2,
+                    peak_acceleration_floor=self.peak_acceleration_floor, peaks_in_step=self.peaks_in_step,
+                    peak_displacements_m=list(self.peak_displacements_m), peak_drifts_m=list(self.peak_drifts_m),
+                    peak_drift_ratios=list(self.peak_drift_ratios),
+                    peak_accelerations_m_s2=list(self.peak_accelerations_m_s2))
 
 
 @dataclass(frozen=True)
@@ -364,15 +388,50 @@ def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
         peak_impact_velocity_m_s=v_impact)
 
 
-def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSummary:
-    x = np.abs(np.column_stack([result[column(name, element_name("x", i))] for i in range(1, n + 1)]))
-    d = np.abs(np.column_stack([result[column(name, element_name("drift", i))] for i in range(1, n + 1)]))
-    kx, fx = np.unravel_index(np.argmax(x), x.shape)
-    kd, fd = np.unravel_index(np.argmax(d), d.shape)
+#: storey height (m) assumed for drift ratios when the building FMU has no ``storey_height``
+DEFAULT_STOREY_HEIGHT = 3.0
+
+
+def _floor_history(result: SimulationResult, name: str, variable: str, n: int) -> np.ndarray:
+    return np.abs(np.column_stack([result[column(name, element_name(variable, i))] for i in range(1, n + 1)]))
+
+
+def _peaks(result: SimulationResult, name: str, variable: str, n: int) -> tuple[np.ndarray, bool]:
+    """Per floor/storey peak of ``|variable|``: the FMU's in-step running peak ``<variable>_peak``
+    at the end of the run when it has one (True), else the largest sample (False)."""
+    if result.has(column(name, element_name(f"{variable}_peak", 1))):
+        return np.array([float(result[column(name, element_name(f"{variable}_peak", i))][-1])
+                         for i in range(1, n + 1)]), True
+    return np.max(_floor_history(result, name, variable, n), axis=0), False
+
+
+def _building_summary(result: SimulationResult, name: str, n: int,
+                      spikes: Mapping[int, float] | None = None) -> BuildingSummary:
+    spec = result.scene.instance(name)
+    x_samples = _floor_history(result, name, "x", n)
+    x, in_step = _peaks(result, name, "x", n)
+    d, _ = _peaks(result, name, "drift", n)
+    a, _ = _peaks(result, name, "a", n)
+    for floor, value in (spikes or {}).items():   # the contacts' instantaneous peak forces
+        a[floor - 1] = max(a[floor - 1], value)
+    heights = []
+    for i in range(1, n + 1):
+        try:
+            heights.append(float(spec.value(element_name("storey_height", i))))
+        except KeyError:                            # a building.fmu without storey heights
+            heights.append(DEFAULT_STOREY_HEIGHT)
+    ratio = d / np.array(heights)
+    fx, fd, fr, fa = (int(np.argmax(v)) for v in (x, d, ratio, a))
+    # when: the sample closest to the peak of that floor (the in-step peak lies in an adjacent step)
+    kx = int(np.argmax(x_samples[:, fx]))
     return BuildingSummary(
-        n_storeys=n, peak_displacement_m=float(x[kx, fx]), peak_displacement_floor=int(fx + 1),
-        peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[kd, fd]),
-        peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))))
+        n_storeys=n, peak_displacement_m=float(x[fx]), peak_displacement_floor=fx + 1,
+        peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[fd]), peak_drift_storey=fd + 1,
+        peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))),
+        peak_drift_ratio=float(ratio[fr]), peak_drift_ratio_storey=fr + 1, peak_acceleration_m_s2=float(a[fa]),
+        peak_acceleration_floor=fa + 1, peaks_in_step=in_step, peak_displacements_m=tuple(map(float, x)),
+        peak_drifts_m=tuple(map(float, d)), peak_drift_ratios=tuple(map(float, ratio)),
+        peak_accelerations_m_s2=tuple(map(float, a)))
 
 
 def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = None) -> Summary:
@@ -380,7 +439,9 @@ def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = N
     was made with (:func:`cosim.master.provenance.provenance`), kept as it is."""
     scene = result.scene
     contacts = {c.name: _contact_summary(result, c.name) for c in scene.contacts}
-    buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name)) for b in scene.buildings}
+    spikes = contact_floor_accelerations(result)
+    buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name), spikes.get(b.name))
+                 for b in scene.buildings}
     e = energy_history(result)
     energy_in = float(e["input"][-1])
     residual = float(e["residual"][-1])

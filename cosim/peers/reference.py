@@ -182,6 +182,8 @@ class ReferenceResult:
     peak_force_N: float
     dissipated_energy_J: float
     peak_displacements: tuple[np.ndarray, ...]   # per building, per floor: max |u| (m)
+    peak_drifts: tuple[np.ndarray, ...]          # per building, per storey: max |u_i - u_(i-1)| (m)
+    peak_accelerations: tuple[np.ndarray, ...]   # per building, per floor: max |absolute acceleration| (m/s^2)
     t_steps: np.ndarray
     floor_offsets: tuple[int, ...]
     method: str
@@ -519,7 +521,7 @@ class _Integration:
         if t_output.size and t_output[0] == 0.0:
             self.y_out[0] = y0
             self.out_index = 1
-        self.peaks = _PeakTracker(np.abs(y0[:system.n]))
+        self.peaks = _PeakTracker(system, y0)
 
     def march(self, breaks: np.ndarray, stop_time: float) -> None:
         """Integrate from 0 to ``stop_time``: one segment to the next event or breakpoint at a time."""
@@ -560,7 +562,7 @@ class _Integration:
             if sol.status == 1 and sol.t.size >= 3:   # the event step is truncated: use the one before
                 self.first_step = float(sol.t[-2] - sol.t[-3])
         self.step_t.append(sol.t[1:])
-        self.peaks.update(sol)
+        self.peaks.update(sol, list(phases), v_imp.copy())
 
         # output grid points inside (t, t_new]
         stop = np.searchsorted(self.t_output, t_new, side="right")
@@ -632,14 +634,17 @@ class _Integration:
         energies = Energies(input=y_out[:, 2 * n], kinetic=kinetic, strain=strain, damping=y_out[:, 2 * n + 1],
                             contact_work=contact_work, contact_stored=stored.sum(axis=1),
                             residual=y_out[:, 2 * n] + e0 - (kinetic + strain + y_out[:, 2 * n + 1] + contact_work))
-        peak_u = self.peaks.refined()
+        peak_u, peak_d, peak_a = self.peaks.refined()
+        per_building = list(zip(system.offsets[:-1], system.offsets[1:]))
         return ReferenceResult(
             t=t_output, u=u_out, v=v_out, contact_force=forces, penetration=deltas, energies=energies,
             impact_list=tuple(imp for imp in impacts if not imp.grazing),
             graze_list=tuple(imp for imp in impacts if imp.grazing),
             peak_force_N=max((imp.peak_force_N for imp in impacts), default=0.0),
             dissipated_energy_J=float(sum(imp.dissipated_energy_J for imp in impacts)),
-            peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(system.offsets[:-1], system.offsets[1:])),
+            peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in per_building),
+            peak_drifts=tuple(peak_d[o0:o1] for o0, o1 in per_building),
+            peak_accelerations=tuple(peak_a[o0:o1] for o0, o1 in per_building),
             t_steps=np.concatenate(self.step_t), floor_offsets=system.offsets, method=self.method, rtol=self.rtol,
             nfev=self.nfev, njev=self.njev, nlu=self.nlu, n_segments=self.segments,
             wall_time_s=time.perf_counter() - t_start, event_counts=self.event_counts,
@@ -708,40 +713,76 @@ def _segment_peaks(system: _System, sol, c: int, phases, v_imp) -> tuple[float, 
 
 
 class _PeakTracker:
-    """Largest ``|u|`` of every floor over the run, from the dense output.
+    """Largest ``|u|`` (floor displacement), ``|u_i - u_(i-1)|`` (storey drift) and ``|a|``
+    (absolute floor acceleration ``M^-1 (-K u - C v + f_contact)``, the contact force of the
+    segment's phases included: the impact spikes) of every floor over the run.
 
-    Each segment is sampled at its steps and 8 points inside each step; the segment holding
-    a floor's best sample is kept, and :meth:`refined` polishes each maximum with a bounded
-    scalar search on that segment's interpolant (the grid alone is off by ~(w h)^2 / 8).
+    Each segment is sampled at its steps and 8 points inside each step; the segment holding a
+    quantity's best sample is kept with its phases, and :meth:`refined` polishes each maximum
+    with a bounded scalar search on that segment's interpolant (the grid alone is off by
+    ~(w h)^2 / 8).
     """
 
-    def __init__(self, initial: np.ndarray):
-        self.value = initial.copy()
-        self.where: list = [None] * initial.size
+    def __init__(self, system: "_System", y0: np.ndarray):
+        self.system = system
+        n = system.n
+        drift = np.eye(n)
+        for o0, o1 in zip(system.offsets[:-1], system.offsets[1:]):
+            for i in range(o0 + 1, o1):
+                drift[i, i - 1] = -1.0      # storey i: u_i - u_(i-1); the lowest storey: u_1 - ground
+        self.drift = drift
+        self.value = np.zeros((3, n))
+        self.where: list[list] = [[None] * n for _ in range(3)]
+        u0, v0 = y0[:n], y0[n:2 * n]
+        self.value[0] = np.abs(u0)
+        self.value[1] = np.abs(drift @ u0)
+        self.value[2] = np.abs(self._acceleration(y0[:, None], [OPEN] * len(system.contacts),
+                                                  np.zeros(len(system.contacts)))[:, 0])
 
-    def update(self, sol) -> None:
+    def _acceleration(self, ys: np.ndarray, phases, v_imp) -> np.ndarray:
+        """Absolute floor accelerations (n, points) of states ``ys`` (size, points)."""
+        system, n = self.system, self.system.n
+        f = -(system.K @ ys[:n]) - system.C @ ys[n:2 * n]
+        if any(p != OPEN for p in phases):
+            for k in range(ys.shape[1]):
+                forces, _ = system.contact_forces(ys[:, k], phases, v_imp)
+                np.subtract.at(f[:, k], system.dof_left, forces)
+                np.add.at(f[:, k], system.dof_right, forces)
+        return system.minv[:, None] * f
+
+    def _quantities(self, ys: np.ndarray, phases, v_imp) -> np.ndarray:
+        n = self.system.n
+        return np.abs(np.stack([ys[:n], self.drift @ ys[:n], self._acceleration(ys, phases, v_imp)]))
+
+    def update(self, sol, phases, v_imp) -> None:
         ts = sol.t
         if ts.size < 2:
             return
         frac = np.linspace(0.0, 1.0, 9)[:-1]
         grid = np.append((ts[:-1, None] + np.diff(ts)[:, None] * frac).ravel(), ts[-1])
-        u = np.abs(sol.sol(grid)[:self.value.size])
-        best = np.argmax(u, axis=1)
-        for dof in np.flatnonzero(u[np.arange(u.shape[0]), best] > self.value):
-            k = best[dof]
-            self.value[dof] = u[dof, k]
-            self.where[dof] = (sol.sol, grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)])
+        q = self._quantities(sol.sol(grid), phases, v_imp)          # (3, n, points)
+        best = np.argmax(q, axis=2)
+        for kind in range(3):
+            row = q[kind, np.arange(q.shape[1]), best[kind]]
+            for dof in np.flatnonzero(row > self.value[kind]):
+                k = best[kind, dof]
+                self.value[kind, dof] = row[dof]
+                self.where[kind][dof] = (sol.sol, grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)], phases, v_imp)
 
-    def refined(self) -> np.ndarray:
+    def refined(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         out = self.value.copy()
-        for dof, where in enumerate(self.where):
-            if where is None or where[2] <= where[1]:
-                continue
-            interp, lo, hi = where
-            res = minimize_scalar(lambda tt: -abs(interp(tt)[dof]), bounds=(lo, hi), method="bounded",
-                                  options={"xatol": 1e-12 * max(1.0, hi)})
-            out[dof] = max(out[dof], -float(res.fun))
-        return out
+        for kind in range(3):
+            for dof, where in enumerate(self.where[kind]):
+                if where is None or where[2] <= where[1]:
+                    continue
+                interp, lo, hi, phases, v_imp = where
+
+                def minus(tt, kind=kind, dof=dof, interp=interp, phases=phases, v_imp=v_imp):
+                    return -float(self._quantities(interp(tt)[:, None], phases, v_imp)[kind, dof, 0])
+
+                res = minimize_scalar(minus, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12 * max(1.0, hi)})
+                out[kind, dof] = max(out[kind, dof], -float(res.fun))
+        return out[0], out[1], out[2]
 
 
 def _force_history(system: _System, t_out, y_out, impacts):
