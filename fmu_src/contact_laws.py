@@ -234,9 +234,15 @@ class ForceShape:
       been clipped, the contact has released), or None if it cannot change sign.
 
     Each expression is the one the package has always evaluated (bit for bit).
+
+    ``drops_at_rest``: the damped branch keeps a force above the spring's at ``delta_dot = 0``
+    (crvk), so a law that switches it off in restitution has a force drop there, and a
+    contact pushed together with a force between the two branches sticks
+    (:attr:`LawSpec.sticks`).
     """
 
     name = "shape"
+    drops_at_rest = False
 
     def raw_force(self, law: "ContactLaw", d: float, spring: float, delta_dot: float, v_imp: float) -> float:
         raise NotImplementedError
@@ -353,6 +359,7 @@ class Crvk(ForceShape):
     scaled ``f = (d^n + sqrt(d^(2n) + 4 zeta d^(n-1))) / 2``.  Never negative."""
 
     name = "crvk"
+    drops_at_rest = True     # f(d, 0) = (d^n + sqrt(d^2n + 4 zeta d^(n-1))) / 2 > d^n
 
     def raw_force(self, law, d, spring, delta_dot, v_imp):
         q = law.zeta * law.k * law.m * v_imp * v_imp * _pow_or_limit(d, law.n - 1.0)
@@ -447,6 +454,16 @@ class LawSpec:
     def clipped(self) -> bool:
         """True if the raw force can turn negative in restitution (it is clipped at 0)."""
         return self.separation != PENETRATION
+
+    @property
+    def sticks(self) -> bool:
+        """True if a contact can stick at ``delta_dot = 0``: the force drops there from the
+        approach branch to the restitution branch (an approach-only dashpot whose shape
+        ``drops_at_rest``), so a push between the two forces at the same penetration fits
+        neither branch; the contact is held (Filippov's sliding motion) until the push leaves
+        that band.  The resolver and the reference solver hold it; for ``zeta = 0`` the band
+        is empty."""
+        return self.dashpot == APPROACH and self.shape.drops_at_rest
 
     def dashpot_acts(self, approaching: bool) -> bool:
         """True on the damped branch: the dashpot acts always, or in approach only."""

@@ -54,6 +54,16 @@ def host_requirements_text() -> str:
             f"(resources/requirements.txt: {', '.join(HOST_REQUIREMENTS)})")
 
 
+#: communication steps [s] an FMU accepts: below MIN_STEP the in-step arithmetic (rates
+#: measured over the step, impulse / h) loses its meaning long before any physics needs such
+#: a step (the stiffest contact of the tests lasts 38 us); MAX_STEP bounds a step's work
+MIN_STEP = 1e-12
+MAX_STEP = 1e6
+#: a step must also change the time: h >= TIME_RESOLUTION |t| (t + h distinct from t, with
+#: six bits to spare)
+TIME_RESOLUTION = 64 * 2.220446049250313e-16
+
+
 @dataclass(frozen=True)
 class Variable:
     """One FMI scalar variable, declared as data.
@@ -160,6 +170,7 @@ class SlaveBase(Fmi2Slave):
         start, stop, step = self.DEFAULT_EXPERIMENT
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self._error: str | None = None
+        self._t_next: float | None = None   # s, where the next step must start (None: anywhere)
         # (variable, attribute, index) triples, resolved once: do_step runs thousands of times
         self._real_inputs: list[tuple[Variable, str, int | None]] = []
         self._checked: list[tuple[Variable, str, int | None]] = []
@@ -282,6 +293,7 @@ class SlaveBase(Fmi2Slave):
                 problems.extend(self.validate())
             except Exception as exc:  # a broken check must not kill the host
                 problems.append(f"parameter check failed: {exc!r}")
+        self._t_next = None
         if problems:
             self._fail(f"{self.instance_name}: invalid parameters: " + "; ".join(problems))
             return
@@ -296,9 +308,9 @@ class SlaveBase(Fmi2Slave):
         if self._error is not None:
             self.log(self._error, Fmi2Status.error)
             return False
-        if not (step_size > 0.0 and math.isfinite(step_size)):
-            self.log(f"{self.instance_name}: communication step size = {step_size!r} s must be > 0",
-                     Fmi2Status.error)
+        problem = self._step_problem(current_time, step_size)
+        if problem is not None:   # refused before anything changes: a valid step may follow
+            self.log(f"{self.instance_name}: {problem}", Fmi2Status.error)
             return False
         for var, attr, idx in self._real_inputs:
             value = getattr(self, attr) if idx is None else getattr(self, attr)[idx]
@@ -315,7 +327,27 @@ class SlaveBase(Fmi2Slave):
             self.log(f"{self.instance_name}: t = {current_time:.9g} s: internal error {exc!r}\n"
                      f"{traceback.format_exc(limit=4)}", Fmi2Status.error)
             return False
+        self._t_next = current_time + step_size
         return True
+
+    def _step_problem(self, t: float, h: float) -> str | None:
+        """Why a doStep(t, h) is refused, or None: the allowed step sizes and times."""
+        if not math.isfinite(t):
+            return f"communication point t = {t!r} s is not finite"
+        floor = max(MIN_STEP, TIME_RESOLUTION * abs(t))
+        if not (math.isfinite(h) and floor <= h <= MAX_STEP):
+            return (f"communication step size h = {h!r} s at t = {t:.17g} s is outside the allowed range "
+                    f"{floor:.3g} s <= h <= {MAX_STEP:g} s")
+        if self._t_next is not None:
+            # FMI 2.0: each step starts where the last ended, unless a saved state was restored
+            # (fmi2SetFMUstate restores this too); round-off of the host's own time sums allowed
+            slack = 1e-9 * h + 4.0 * TIME_RESOLUTION * max(abs(t), abs(self._t_next))
+            if abs(t - self._t_next) > slack:
+                went = "back in time" if t < self._t_next else "forward, skipping time"
+                return (f"communication point t = {t:.17g} s: the last step ended at {self._t_next:.17g} s, so "
+                        f"the host went {went} without restoring a saved FMU state (fmi2SetFMUstate); "
+                        f"allowed: t = {self._t_next:.17g} s")
+        return None
 
     def _fail(self, message: str) -> None:
         self._error = message
@@ -324,7 +356,7 @@ class SlaveBase(Fmi2Slave):
     # -- FMU state -------------------------------------------------------------------------------
     def _get_fmu_state(self) -> dict[str, Any]:
         state = {}
-        for attr in {v.attribute for v in self.VARIABLES} | set(self.PRIVATE_STATE) | {"_error"}:
+        for attr in {v.attribute for v in self.VARIABLES} | set(self.PRIVATE_STATE) | {"_error", "_t_next"}:
             state[attr] = copy.deepcopy(getattr(self, attr))
         return state
 

@@ -36,16 +36,16 @@ class PlainContact:
         self.F_max = 0.0
         self.delta_max = 0.0
         self.impact_time = 0.0
-        self.started = False
+        self.stepped = False        # a step was taken (its work is booked at the next)
         self.last_CR = math.nan     # -delta_dot / v_imp at the first inputs found out of contact
         self.last_E = 0.0           # J, dissipated by the latest completed contact
         self._E_at_onset = 0.0
 
     def step(self, delta: float, delta_dot: float, h: float) -> float:
         """Force [N] for the step of length ``h`` [s] starting at the given inputs."""
-        if self.started:
+        if self.stepped:
             self.work += self.F * (delta - self.delta_prev)
-        self.started = True
+        self.stepped = True
         self.delta_prev = delta
         if delta > 0.0:
             if not self.in_contact:

@@ -15,10 +15,19 @@ See docs/contact_models.md for the models and the in-step rules.
 """
 from __future__ import annotations
 
+import copy
+
+from pythonfmu.enums import Fmi2Status
+
 from .contact_laws import MODELS, law_for
-from .fmi_slave import SlaveBase as Fmi2Slave, Variable
+from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable
+from .host_observer import HOSTS
 from .plain_contact import PlainContact
+from .plausibility import PlausibilityWatch
 from .resolver import ImpactResolver
+
+#: what the FMU does with a step its plausibility watch finds wrong (PlausibilityWatch)
+ON_IMPLAUSIBLE = ("warn", "discard")
 
 _OUT = dict(causality="output")
 
@@ -56,6 +65,17 @@ class Pounding(Fmi2Slave):
                  description="a contact whose penetration stays below this is a graze: counted in grazes, not in "
                              "impacts (0: every contact is an impact; building scenes use 3e-4, three times the "
                              "co-simulation's resolution of the relative floor position, docs/contact_models.md)"),
+        Variable("host", type="String", start="any", choices=tuple(HOSTS),
+                 description="how the host applies F, if it declares it: 'zoh' exact for a force held over the "
+                             "step in Gauss-Seidel order (building.fmu), 'zoh_late' the same one step late "
+                             "(Jacobi), 'trapezoidal'/'trapezoidal_late' Newmark average acceleration; 'any': "
+                             "measured from the host's response to the first impact"),
+        Variable("on_implausible", type="String", start="warn", choices=ON_IMPLAUSIBLE,
+                 description="a step that created energy or bounced the bodies (a host applying the force late at "
+                             "a coarse step, a plain-law step too long for the impact, impacts multiplying): 'warn' "
+                             "logs a warning naming the numbers and the remedy; 'discard' refuses the step with "
+                             "fmi2Discard and leaves the instance as before it, so that a host that can roll back "
+                             "retries with a smaller step"),
         # inputs
         Variable("x1", causality="input", start=0.0, unit="m", description="displacement of body 1"),
         Variable("v1", causality="input", start=0.0, unit="m/s", description="velocity of body 1"),
@@ -65,6 +85,10 @@ class Pounding(Fmi2Slave):
         Variable("F", start=0.0, unit="N", **_OUT,
                  description="contact force, >= 0, on body 2 along +x and on body 1 along -x; resolved mode: "
                              "mean over the last step (F * h = impulse); plain mode: force law at the inputs"),
+        Variable("F1", start=0.0, unit="N", **_OUT,
+                 description="force on body 1 along +x, -F (wire it to body 1 without any sign change)"),
+        Variable("F2", start=0.0, unit="N", **_OUT,
+                 description="force on body 2 along +x, +F"),
         Variable("F_max", start=0.0, unit="N", **_OUT,
                  description="largest instantaneous contact force so far"),
         Variable("delta", start=0.0, unit="m", **_OUT,
@@ -107,37 +131,48 @@ class Pounding(Fmi2Slave):
         Variable("substeps", type="Integer", start=0, **_OUT,
                  description="internal integration steps in the last doStep (cost counter)"),
     )
-    PRIVATE_STATE = ("_contact",)
+    PRIVATE_STATE = ("_contact", "_watch")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._contact = None        # ImpactResolver or PlainContact, built at initialisation
+        self._watch = None          # PlausibilityWatch
 
     def initialize(self) -> None:
         law = law_for(self.model, self.k, self.n, self.m1, self.m2, self.CR, self.zeta)
         self.zeta_used = law.zeta
         depth = float(self.graze_depth)
-        self._contact = (ImpactResolver(law, graze_depth=depth) if self.resolve_impacts
+        self._contact = (ImpactResolver(law, host=self.host, graze_depth=depth) if self.resolve_impacts
                          else PlainContact(law, graze_depth=depth))
+        self._watch = PlausibilityWatch(law)
 
     def step(self, current_time: float, step_size: float) -> None:
         delta = self.x1 - self.x2 - self.gap
         delta_dot = self.v1 - self.v2
+        discard = self.on_implausible == "discard"
+        saved = copy.deepcopy((self._contact, self._watch)) if discard else None
         c = self._contact
         started = c.started
         if self.resolve_impacts:
             out = c.step(delta, delta_dot, step_size)
-            self.F = out.mean_force
-            self.impulse = out.impulse
-            self.substeps = out.substeps
-            self.delta = c.delta_end
-            self.delta_dot = c.delta_dot_end
+            F, impulse, substeps = out.mean_force, out.impulse, out.substeps
+            for notice in c.observer.notices:
+                self.log(f"{self.instance_name}: t = {current_time:.9g} s: {notice}", Fmi2Status.warning)
+            c.observer.notices.clear()
         else:
-            self.F = c.step(delta, delta_dot, step_size)
-            self.impulse = self.F * step_size
-            self.substeps = 1
-            self.delta = delta
-            self.delta_dot = delta_dot
+            F = c.step(delta, delta_dot, step_size)
+            impulse, substeps = F * step_size, 1
+        for kind, message in self._watch.check(c, step_size):
+            if discard:
+                self._contact, self._watch = saved
+                raise SlaveError(f"step of {step_size:.6g} s refused (on_implausible = 'discard'): {message}")
+            self.log(f"{self.instance_name}: t = {current_time:.9g} s: {message}", Fmi2Status.warning)
+        self.F, self.impulse, self.substeps = F, impulse, substeps
+        if self.resolve_impacts:
+            self.delta, self.delta_dot = c.delta_end, c.delta_dot_end
+        else:
+            self.delta, self.delta_dot = delta, delta_dot
+        self.F1, self.F2 = -self.F, self.F
         self.CR_achieved = 0.0 if c.last_CR != c.last_CR else c.last_CR   # NaN before the first impact ends
         self.E_last = c.last_E
         self.in_contact = c.in_contact

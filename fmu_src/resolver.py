@@ -9,12 +9,14 @@ The force of each branch is the contact law table's scaled kernel
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
 from scipy.optimize import brentq, minimize_scalar
 
 from .contact_laws import MIN_IMPACT_SPEED, ContactLaw
+from .host_observer import HostObserver
 
 # Dormand-Prince 5(4) tableau (Dormand & Prince 1980; as in scipy's RK45).
 _C2, _C3, _C4, _C5 = 1 / 5, 3 / 10, 4 / 5, 8 / 9
@@ -33,9 +35,12 @@ _REAPPROACH_RATE = 1e-9
 #: guard against an endless impact/flight alternation inside one step (never reached in tests)
 _MAX_IMPACTS_PER_STEP = 1000
 #: branch switches (maximum penetration / re-approach) per step after which re-approach is no
-#: longer detected in that step: a quasi-static crvk contact would otherwise chatter at
-#: delta_dot = 0 where its force drops (never reached in the tests or the bundled scenes)
+#: longer detected in that step: a guard against chatter at delta_dot = 0 (a crvk contact held
+#: between its branches sticks instead, ImpactResolver._stick; never reached in the tests)
 _MAX_SWITCHES_PER_STEP = 200
+#: energy the hand-over's timing may have given the host before it is taken back, as a part of
+#: the impact's kinetic energy m v_imp^2 (rule 7)
+_DEBT_TOLERANCE = 1e-4
 
 
 @dataclass
@@ -55,57 +60,60 @@ class ImpactResolver:
     """Locate and integrate impacts inside a communication step, at the impact's own time scale.
 
     The host supplies ``delta`` [m] and ``delta_dot`` [m/s] at the start of each step and applies
-    the returned mean force over the step (zero-order hold).  Inside the step the relative motion
-    obeys ``delta_ddot = a_ext(s) - F / m``: the contact force on the effective mass plus the
+    the returned mean force over the step.  Inside the step the relative motion obeys
+    ``delta_ddot = a_ext(s) - F / m``: the contact force on the effective mass plus the
     *external* relative acceleration ``a_ext`` of the structures the bodies belong to (storey
     springs and dampers; zero for free masses).  Rules (docs/contact_models.md, "in-step rules"):
 
-    1. *Following the host.*  At every step start the host's increments over the last step are
-       split into what the resolver's own mean force did to two free masses
-       (``-F h / m`` in rate, ``-F h^2 / (2 m)`` in position) and the rest, the structures'
-       contribution.  The linear ``a_ext(s)`` that reproduces both increments of the last step,
-       continued, is the external acceleration assumed over the next step
-       (``extrapolate=False``: its mean ``dV / h``, constant).  The difference between the
-       structures' actual contribution and the one assumed is added to the internal state (in
-       and out of contact); the internal rate then equals the host's and the internal
-       penetration is the host's plus the host's zero-order-hold position error.  The force the
-       host held is ours of the same step (Gauss-Seidel) or of the step before (Jacobi),
-       recognised once, at the first step where the force starts or stops and the two
-       hypotheses are told apart 10:1 (Gauss-Seidel until then).  For free masses the structures'
-       contribution is zero to round-off: the free-mass results are unchanged.
-    2. *Onset*: out of contact, a new impact starts where the prediction
-       ``delta_eff + delta_dot s + int int a_ext`` crosses zero while approaching,
-       ``delta_eff = delta - offset``; ``v_imp`` is the rate there.  A step that starts
-       overlapping (a crossing the prediction missed) moves the overlap into ``offset``; the
-       impact starts at once if the bodies approach.
-    3. *During contact* the impact is integrated (Dormand-Prince 5(4), scaled by
+    1. *Following the host* (:class:`HostObserver`).  ``a_ext`` is learnt from the host's
+       velocity increments only, once our own force is taken out of them with the host's
+       identified delivery kernel (or when none of our force can be in them), and extrapolated
+       linearly over the next step.  Position increments, which depend on the host's
+       integrator, are never learnt from.
+    2. *Whose state.*  Out of contact, once every impulse handed over has reached the host, the
+       host's state is the truth (rule 4 for a residual overlap).  Through a contact and until
+       its impulse has reached the host, the resolver's own state is: it is corrected only by
+       the difference between the clean structural increment and the one assumed.  For free
+       masses that difference is zero whatever the host integrator, so an impact of free
+       masses is exact at any step.
+    3. *Onset*: out of contact, a new impact starts where the prediction
+       ``delta_eff + delta_dot s + int int a_ext`` crosses zero while approaching.
+       A step that starts overlapping (a crossing the prediction missed) moves the overlap
+       into ``offset``; the impact starts at once if the bodies approach.
+    4. *During contact* the impact is integrated (Dormand-Prince 5(4), scaled by
        ``L = (m v^2/k)^(1/(n+1))`` and ``T = L / v``) with located events at maximum
        penetration (``delta_dot = 0``), re-approach (``delta_dot`` rising again while loaded,
-       the structure pushing back: same impact) and separation (``delta = 0``, or the raw
+       the structure pushing back: same impact), stick (a push between the two branches of a
+       law whose force drops at ``delta_dot = 0``: held, :meth:`_stick`) and separation (``delta = 0``, or the raw
        force reaching zero for laws with a dashpot in restitution); it may straddle any number
        of steps, and several impacts may occur in one step.
-    4. *After separation* the host, moved by a constant mean force, may still overlap while
-       separating.  The next step records that apparent overlap as ``offset`` (>= 0, cleared once
-       the host's ``delta <= 0``); a force separation with ``delta > 0`` moves the remaining
+    5. *After separation* the host, moved by a held mean force, may still overlap while
+       separating.  Such an apparent overlap is kept as ``offset`` (>= 0, cleared once the
+       host's ``delta <= 0``); a force separation with ``delta > 0`` moves the remaining
        overlap into the offset as well.
-    5. *Impulse and energy*: the impulse is ``int F dt`` of the internal force history,
+    6. *Impulse and energy*: the impulse is ``int F dt`` of the internal force history,
        ``mean_force = impulse / h``.  ``E_dissipated`` is the work of the dissipative part of the
        force, ``int (F - k delta^n) delta_dot dt`` >= 0, integrated along the internal trajectory
        (plus, at a force separation, the elastic energy left in the overlap): it never decreases,
        and it does not depend on how the host holds the force, so the host's energy balance
        shows the coupling error instead of hiding it.
+    7. *Hand-over* (:meth:`_hand_over`): a host that delivers our force ``lead`` steps late on
+       average (the kernel's mean delay) gets the impulse that much early, so that it acts on
+       the host's structures when it acts on the resolver's own bodies; momentum is exact over
+       an episode (``ahead``).  The energy a late hand-over gave the host (``int C A dt``,
+       :meth:`HostObserver._book_timing`) is taken back by shifting the next hand-over.
 
     ``follow_host=False`` restores the free-mass model (``a_ext = 0``, no corrections).
     The instance holds only plain numbers, so ``copy.deepcopy`` saves its state.
     """
 
     def __init__(self, law: ContactLaw, rtol: float = 1e-8, follow_host: bool = True,
-                 extrapolate: bool = True, graze_depth: float = 0.0):
+                 extrapolate: bool = True, host: str = "any", graze_depth: float = 0.0):
         self.law = law
         self.graze_depth = graze_depth   # m: a contact shallower than this is a graze, not an impact
         self.rtol = rtol
         self.follow_host = follow_host
-        self.extrapolate = extrapolate
+        self.observer = HostObserver(law.m, extrapolate, host)
         spec = law.spec   # the law's entry of the contact law table: kernels and separation rule
         self._kernels = {True: spec.kernel(law.zeta, law.n, True), False: spec.kernel(law.zeta, law.n, False)}
         # restitution ends at d = 0 or, for a law whose raw force can reach 0 first, there; the
@@ -113,8 +121,10 @@ class ImpactResolver:
         self._separations = (spec.separation_function(law.zeta, law.n),
                              spec.separation_function(law.zeta, law.n, pulled=True))
         self._separation = self._separations[0]
+        self._sticks = spec.sticks and law.zeta > 0.0   # a push between the branches holds it (rule 4)
         self.in_contact = False
         self.approaching = False
+        self.sticking = False       # held at delta_dot = 0 between the law's two branches (rule 4)
         self.v_imp = 0.0            # latched approach speed of the latest impact, m/s
         self.d = 0.0                # internal scaled penetration (in contact)
         self.u = 0.0                # internal scaled rate (in contact)
@@ -123,13 +133,12 @@ class ImpactResolver:
         self.offset = 0.0           # m, apparent overlap left by a resolved impact
         self.delta_end = 0.0        # m, internal penetration at the end of the last step
         self.delta_dot_end = 0.0    # m/s
+        self.stepped = False        # a step has been taken
+        self.ahead = 0.0            # N s, impulse handed over ahead of the internal trajectory (rule 7)
         self.just_separated = False
         self.dtau = 1e-3            # next internal step, scaled
         self.a0 = 0.0               # m/s^2, external relative acceleration at the step start
-        self.a1 = 0.0               # m/s^3, its rate over the step (extrapolate=True only)
-        self.host = ()              # (delta, delta_dot, h, F, F before) of the previous step (rule 1)
-        self.held_late = False      # the host holds the force one step late (Jacobi): rule 1
-        self.held_known = False     # held_late decided on clear evidence (then final)
+        self.a1 = 0.0               # m/s^3, its rate over the step
         self.correction = (0.0, 0.0)  # (m, m/s) last correction applied to the internal state
         self.impacts = 0            # contacts that reached graze_depth (counted when they do)
         self.grazes = 0             # completed contacts that never reached graze_depth
@@ -178,51 +187,23 @@ class ImpactResolver:
         """Position change [m] from the external acceleration over [t, t + r], from rest."""
         return 0.5 * self.a0 * r * r + self.a1 * (0.5 * t * r * r + r * r * r / 6.0)
 
-    def _follow(self, delta: float, delta_dot: float) -> None:
-        """Rule 1: measure the structures' contribution over the last step, correct, predict."""
-        if not (self.follow_host and self.host):
+    def _follow(self, delta: float, delta_dot: float, h: float) -> None:
+        """Rule 1-2: learn the structures' motion, correct the resolver's own state by the
+        difference between the clean structural increment and the one assumed."""
+        if not self.follow_host:
             self.a0 = self.a1 = 0.0
             return
-        D, V, hp, F, F_before = self.host
-        m = self.law.m
-        dV_assumed = self._ext_rate(0.0, hp)
-        base_v = delta_dot - V
-        # The host held our last mean force F over the step (Gauss-Seidel) or, one step late,
-        # the one before (Jacobi).  A wrong choice leaves a lasting rate error of
-        # (F - F_before) h / m.  The two differ by a whole step's impulse at the first step with
-        # force and at the first without; but an impact that starts late in a step, or ends
-        # with the structures pushing, makes that difference as small as the prediction error
-        # (Kobe at h = 5 ms: a 413 N first step read as Jacobi under a Gauss-Seidel host cost
-        # 4 % of the dissipated energy).  So the choice is made once, at the first such step
-        # where one hypothesis misses by a tenth of the difference or less; until then the
-        # host is taken as Gauss-Seidel (the master's scheme).
-        if not self.held_known and (F == 0.0) != (F_before == 0.0):
-            miss_same = abs(base_v + F * hp / m - dV_assumed)
-            miss_late = abs(base_v + F_before * hp / m - dV_assumed)
-            if min(miss_same, miss_late) <= 0.1 * abs(F - F_before) * hp / m:
-                self.held_late = miss_late < miss_same
-                self.held_known = True
-        F_held = F_before if self.held_late else F
-        # the host's increments minus what the held force alone does to free masses
-        dV = base_v + F_held * hp / m
-        dX = delta - D - V * hp + 0.5 * F_held * hp * hp / m
-        cu = dV - dV_assumed
-        cx = dX - self._ext_position(0.0, hp)
+        cx, cu = (float(c) for c in self.observer.observe(delta, delta_dot, h))
+        self.a0, self.a1 = float(self.observer.a0), float(self.observer.a1)
         self.correction = (cx, cu)
+        if cx == 0.0 and cu == 0.0:
+            return
         if self.in_contact:
             v, L = self.v_imp, self.law.length_scale(self.v_imp)
             self.d += cx / L
             self.u += cu / v
         self.delta_end += cx
         self.delta_dot_end += cu
-        if self.extrapolate:
-            # a(s) = b0 + b1 s over the last step fits both increments exactly; continue it
-            b1 = 12.0 * (0.5 * dV * hp - dX) / (hp * hp * hp)
-            self.a1 = b1
-            self.a0 = dV / hp + 0.5 * b1 * hp
-        else:
-            self.a0 = dV / hp
-            self.a1 = 0.0
 
     # -- one communication step ------------------------------------------------------------
     def step(self, delta: float, delta_dot: float, h: float) -> StepOutcome:
@@ -231,46 +212,94 @@ class ImpactResolver:
             raise ValueError(f"communication step h = {h!r} s is outside the allowed range h > 0")
         out = StepOutcome()
         delta, delta_dot = float(delta), float(delta_dot)
-        following = self.follow_host and bool(self.host)
-        self._follow(delta, delta_dot)
-        t = 0.0                                  # s into the step
-        if not self.in_contact:
-            d0, v0 = self._flight_start(delta, delta_dot, following)
+        self._follow(delta, delta_dot, h)
+        d0, v0 = (0.0, 0.0) if self.in_contact else self._flight_start(delta, delta_dot)
+        self._advance(0.0, h, d0, v0, out)
+        # the force law is compressive; a quadrature of a force that fades to zero at
+        # separation can sum to -1e-29 N s, which must not reach the host as tension
+        internal = max(out.impulse, 0.0)
+        lead = self.observer.lead if self.follow_host else 0.0
+        if lead > 0.0 or self.ahead != 0.0 or (self.follow_host and self.observer.debt > 0.0):
+            out.impulse, internal = self._hand_over(internal, lead, h)
+        else:
+            out.impulse = internal
+        out.mean_force = out.impulse / h
+        if self.follow_host:
+            self.observer.record(out.mean_force, h, internal)
+        self.stepped = True
+        return out
+
+    def _probe(self, h: float, span: float) -> float:
+        """Impulse [N s] the resolver's own bodies will receive over ``span`` s after this step."""
+        probe = copy.copy(self)
+        out = StepOutcome()
+        probe._advance(h, h + span, probe.delta_end, probe.delta_dot_end, out)
+        return max(out.impulse, 0.0)
+
+    def _hand_over(self, internal: float, lead: float, h: float) -> tuple[float, float]:
+        """Rule 7: the impulse [N s] to hand over this step, and the internal one to book.
+
+        The host delivers our force ``lead`` steps late on average: hand it over that much
+        early, so that it reaches the host's structures when it acts on the resolver's own
+        bodies (``ahead`` keeps the difference; momentum is exact over an episode).  While the
+        timing has given the host energy (the host's kernel was not yet known), hand over
+        early or late by the step that takes it back: ``int C A dt`` (HostObserver._book_timing)
+        changes by ``dJ A h`` when ``dJ`` is handed over one step early.
+        """
+        target = self._probe(h, lead * h) if lead > 0.0 else 0.0
+        debt = self.observer.debt
+        a_next = self.a0 + self.a1 * h
+        if debt > _DEBT_TOLERANCE * self.law.m * self.v_imp * self.v_imp and a_next != 0.0 \
+                and (self.in_contact or target > 0.0):
+            shift = -debt / (a_next * h)
+            if shift > 0.0:                       # early: at most the next step's impulse
+                shift = min(shift, self._probe(h, (lead + 1.0) * h) - target)
+            target += shift
+        emitted = max(internal + target - self.ahead, 0.0)
+        self.ahead += emitted - internal
+        if not self.in_contact and target <= 0.0 and self.ahead > 0.0:
+            # handed over for an impact the resolver's own motion did not make after all:
+            # the host has it, so the bodies have it (momentum)
+            self.delta_dot_end -= self.ahead / self.law.m
+            internal += self.ahead
+            self.ahead = 0.0
+        return emitted, internal
+
+    def _advance(self, t: float, t_end: float, d0: float, v0: float, out: StepOutcome) -> None:
+        """Flight and impacts from ``t`` to ``t_end`` [s] into the step (d0, v0: flight state at t)."""
         for _ in range(_MAX_IMPACTS_PER_STEP):
             if self.in_contact:
-                t = self._integrate(t, h, out)
+                t = self._integrate(t, t_end, out)
                 if self.in_contact:
-                    break
+                    return
                 d0, v0 = self._sep
-            s = self._onset(d0, v0, t, h - t)
+            s = self._onset(d0, v0, t, t_end - t)
             if s is None:
-                r = h - t
+                r = t_end - t
                 self.delta_end = d0 + v0 * r + self._ext_position(t, r)
                 self.delta_dot_end = v0 + self._ext_rate(t, r)
-                break
+                return
             v_on = v0 + self._ext_rate(t, s)
             t += s
             self._start(v_on)
             self.onset_offset = t
             out.impacts_started += 1
-        # the force law is compressive; a quadrature of a force that fades to zero at
-        # separation can sum to -1e-29 N s, which must not reach the host as tension
-        out.impulse = max(out.impulse, 0.0)
-        out.mean_force = out.impulse / h
-        self.host = (delta, delta_dot, h, out.mean_force, self.host[3] if self.host else 0.0)
-        return out
 
-    def _flight_start(self, delta: float, delta_dot: float, following: bool):
-        """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 4)."""
-        if following:
-            # internal state carried over the last step and corrected: host - offset
-            inner = self.delta_end
-            # equal to the host's rate unless a late-held impulse is still pending
-            v0 = delta_dot if self.host[3] == 0.0 and self.host[4] == 0.0 else self.delta_dot_end
+    def _flight_start(self, delta: float, delta_dot: float):
+        """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 5)."""
+        if self.follow_host and self.stepped and self.observer.pending():
+            # part of an impulse is still on its way to the host: the resolver's own flight
+            d0, v0 = self.delta_end, self.delta_dot_end
+            self.offset = max(0.0, delta - d0) if delta > 0.0 else 0.0
+            if d0 > 0.0:
+                self.offset, d0 = self.offset + d0, 0.0
+            return d0, v0
+        if self.follow_host and self.stepped:
+            inner = self.delta_end               # internal flight, predicted over the last step
         else:
             inner = self.delta_end if self.just_separated else delta - self.offset
-            v0 = delta_dot
         self.just_separated = False
+        v0 = delta_dot
         offset = delta - inner
         if delta <= 0.0 or offset < 0.0:         # host open, or the host is behind the internal state
             offset = 0.0
@@ -313,6 +342,7 @@ class ImpactResolver:
     def _start(self, v: float) -> None:
         self.in_contact = True
         self.approaching = True
+        self.sticking = False
         self.v_imp = max(v, MIN_IMPACT_SPEED)
         self.d, self.u, self.e, self.e_top = 0.0, 1.0, 0.0, 0.0
         self.started += 1
@@ -361,11 +391,13 @@ class ImpactResolver:
         tau_end = (h - t) / T
         # 1e-10: a pull below 1e-10 of the impact's force scale cannot clip the force before
         # round-off in 1 + zeta u does (LawSpec.separation_function, pulled)
-        self._separation = self._separations[min(al0, al0 + al1 * tau_end) < -1e-10]
+        self._separation = self._separations[1 if min(al0, al0 + al1 * tau_end) < -1e-10 else 0]
         u_ref = self.u                            # impulse = m (ext rate change - internal rate change)
         d, u = self.d, self.u
         # branch consistent with the (possibly corrected) state
-        if self.approaching and u <= 0.0:
+        if self.sticking:
+            u = 0.0                               # held: a correction of the rate goes into the force
+        elif self.approaching and u <= 0.0:
             self._switch_to_restitution(d, u, L)
         elif not self.approaching and u > _REAPPROACH_RATE:
             self.approaching = True
@@ -390,6 +422,14 @@ class ImpactResolver:
         separated = False
         switches = 0
         while tau < tau_end * (1.0 - 1e-15):
+            if self.sticking:
+                tau = self._stick(d, al0, al1, tau, tau_end, base, out, F0)
+                if self.sticking:
+                    break
+                f = self._kernels[self.approaching]
+                fs, p = f(d, 0.0)
+                acc = al0 + al1 * tau - fs
+                continue
             hs = min(dtau, tau_end - tau)
             last = hs >= tau_end - tau
             al_t = al0 + al1 * tau
@@ -428,8 +468,13 @@ class ImpactResolver:
                     nfev += self._sample(base + tau, f_end, d, u, al0 + al1 * tau - f_end, al0 + al1 * tau, al1,
                                          True, out, F0, branch_end=True)
                     self._switch_to_restitution(d, u, L)
-                else:                                     # re-approach: the dashpot acts again
+                    self.sticking = self._holds(d, al0 + al1 * tau)
+                else:                                     # re-approach: the dashpot acts again ...
                     self.approaching = True
+                    if self._holds(d, al0 + al1 * tau):   # ... unless its force would push back at once
+                        self.approaching, self.sticking, u = False, True, 0.0
+                if self.sticking:
+                    continue
                 f = self._kernels[self.approaching]
                 fs, p = f(d, u)
                 acc = al0 + al1 * tau - fs
@@ -460,6 +505,43 @@ class ImpactResolver:
         self.delta_max = max(self.delta_max, d * L)
         self._count_if_deep()
         return h
+
+    def _holds(self, d: float, alpha: float) -> bool:
+        """True if the contact sticks at scaled penetration ``d`` under the scaled external
+        acceleration ``alpha``: pushed together harder than the restitution branch holds at zero
+        rate, less than the approach branch does (crvk's force drop).  Neither branch is then
+        consistent; the solution is Filippov's sliding motion, as in cosim/peers/reference.py.
+        Only a law that :attr:`~.contact_laws.LawSpec.sticks` (for the others the two forces
+        are equal at zero rate, and the band is empty)."""
+        if not self._sticks:
+            return False
+        f_approach = self._kernels[True](d, 0.0)[0]
+        f_restitution = self._kernels[False](d, 0.0)[0]
+        return f_restitution < alpha < f_approach
+
+    def _stick(self, d, al0, al1, tau, tau_end, base, out, F0) -> float:
+        """Hold the penetration from ``tau`` while ``alpha(s) = al0 + al1 s`` stays between the
+        branches' forces at ``d``; returns where it leaves (into approach above the upper one,
+        restitution below the lower one) or ``tau_end``.  The force is ``alpha``: no work, no
+        dissipation; the impulse is the external rate change (_integrate's bookkeeping)."""
+        upper = self._kernels[True](d, 0.0)[0]
+        lower = self._kernels[False](d, 0.0)[0]
+        end = tau_end
+        if al1 > 0.0:
+            end = min(end, (upper - al0) / al1)
+        elif al1 < 0.0:
+            end = min(end, (lower - al0) / al1)
+        end = max(end, tau)
+        for s in (tau, end):                      # the force is linear in time: peaks at the ends
+            F = (al0 + al1 * s) * F0
+            out.peak_force = max(out.peak_force, F)
+            self.impact_peak = max(self.impact_peak, F)
+            self.F_max = max(self.F_max, F)
+        if end < tau_end:
+            self.sticking = False
+            self.approaching = al1 > 0.0
+        self._prev = ()
+        return end
 
     def _dissipated(self, d, u, d1, u1, al, al1, hs) -> float:
         """Scaled energy dissipated over one internal step from (d, u) to (d1, u1), length ``hs``.

@@ -137,6 +137,7 @@ def contact(inst, t, h):
     inst.log.append((t, delta))
     v["delta"] = delta
     v["F"] = v["F_max"] = K * max(delta, 0.0)
+    v["F1"], v["F2"] = -v["F"], v["F"]     # the signed forces the master wires to the bodies
 
 
 class FakeFmu:

@@ -65,8 +65,9 @@ def test_instances_connections_and_default_contact_masses(tmp_path, catalog):
     assert left["n_storeys"] == 2 and left["m[2]"] == 2.0e5 and left["k[1]"] == 4.0e7
     contact = scene.instance("pounding_1").parameters
     assert contact["m1"] == 1.0e5 and contact["m2"] == 3.0e5  # floor masses at the level
-    forces = {(c.target, c.input): c.factor for c in scene.connections() if c.output == "F"}
-    assert forces == {("left", "F[1]"): -1.0, ("right", "F[1]"): 1.0}
+    # each body takes its own signed force (F1 = -F on the left, F2 = F on the right), no factors
+    forces = {(c.target, c.input): (c.output, c.factor) for c in scene.connections() if c.output in ("F1", "F2")}
+    assert forces == {("left", "F[1]"): ("F1", 1.0), ("right", "F[1]"): ("F2", 1.0)}
     assert ("ground", "ag_mean", "left", "ag") in {(c.source, c.output, c.target, c.input)
                                                    for c in scene.connections()}
 

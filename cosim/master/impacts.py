@@ -30,6 +30,7 @@ from scipy.integrate import solve_ivp
 
 from fmu_src.resolver import ImpactResolver
 
+from .coupling import get_strategy
 from .models import contact_law, shear_building
 from .names import column, element_name
 
@@ -75,7 +76,9 @@ def replay_contact(result: "SimulationResult", contact: str) -> list[ContactTraj
     t = result.time
     if not bool(spec.value("resolve_impacts")):
         return _plain_trajectories(result, contact, t)
-    resolver = ImpactResolver(contact_law(spec), graze_depth=float(spec.value("graze_depth")))
+    # the host the coupling declared at initialization, unless the scene set one (System.initialize)
+    host = str(spec.value("host")) if "host" in spec.parameters else get_strategy(result.strategy).host
+    resolver = ImpactResolver(contact_law(spec), host=host, graze_depth=float(spec.value("graze_depth")))
     trace: list[tuple[int, float, float, float]] = []
     resolver.trace = trace
     onsets: dict[int, float] = {}

@@ -275,7 +275,8 @@ class Scene:
                     Connection(level.left, element_name("v", fl), c, "v1"),
                     Connection(level.right, element_name("x", fr), c, "x2"),
                     Connection(level.right, element_name("v", fr), c, "v2"),
-                    # F >= 0 is compressive: it pushes the left body to -x and the right one to +x
-                    Connection(c, "F", level.left, element_name("F", fl), -1.0),
-                    Connection(c, "F", level.right, element_name("F", fr), +1.0)]
+                    # the signed forces on each body (F1 = -F pushes the left body to -x, F2 = F
+                    # the right one to +x): no linear transformation, which some SSP tools ignore
+                    Connection(c, "F1", level.left, element_name("F", fl)),
+                    Connection(c, "F2", level.right, element_name("F", fr))]
         return out

@@ -66,7 +66,7 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     calls_before = system.fmu_calls()
     steps_before = system.do_steps()
     wall = time.perf_counter()
-    system.initialize(0.0, stop_time)
+    system.initialize(0.0, stop_time, host=cls.host)
     solver = cls(system, 0.0, stop_time, step, **options)
     guard = None
     if check_stability:

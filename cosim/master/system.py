@@ -198,17 +198,21 @@ class System:
         return {n.name: n.instance for n in self.nodes}
 
     # -- life cycle ------------------------------------------------------------------------------
-    def initialize(self, t0: float = 0.0, stop_time: float | None = None) -> None:
+    def initialize(self, t0: float = 0.0, stop_time: float | None = None, host: str | None = None) -> None:
         """setupExperiment, parameters, exit initialisation; read the outputs at t0.
 
         Sources and buildings leave initialisation first so that each contact
-        instance starts from the buildings' initial floor states.
+        instance starts from the buildings' initial floor states.  ``host``: the
+        pounding.fmu parameter of that name for every contact whose scene does not
+        set it (the coupling strategy's ``host``).
         """
         self.t0 = t0
         stop_time = self.scene.stop_time if stop_time is None else stop_time
         for n in self.nodes:
             n.instance.setup(t0, stop_time)
             n.instance.set(n.spec.parameters)
+            if host is not None and n.kind == "contact" and "host" not in n.spec.parameters:
+                n.instance.set({"host": host})
         self.y[:] = 0.0
         self.ints[:] = 0
         for n in self.ground + self.buildings + self.contacts:

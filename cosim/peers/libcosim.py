@@ -313,7 +313,16 @@ def run_ssp(path: Path | str, observe: Sequence[str], *, stop_time: float | None
 # isolation in a child process
 # ---------------------------------------------------------------------------------------------
 def _in_child(kind: str, target, observe: list[str], **kwargs) -> LibcosimResult:
-    """Run libcosim in a fresh Python process and return its result.
+    """Run libcosim in a fresh Python process and return its result (:func:`run_isolated`)."""
+    return run_isolated("cosim.peers.libcosim", (kind, target, observe, kwargs), LibcosimError, "libcosim")
+
+
+def run_isolated(module: str, request, error: type[Exception], tool: str, env_extra: dict | None = None):
+    """Run ``python -m module REQUEST ANSWER`` in a fresh process and return what it pickled.
+
+    ``request`` is pickled for the child; the child writes ``("ok", result)`` or
+    ``("error", text)``, and an error becomes ``error(text)``.  ``env_extra`` is added to
+    the child's environment.
 
     Why: libcosim steps the slaves from its own worker threads.  pythonfmu takes the
     GIL there, but the numpy/scipy code inside our FMUs then calls OpenBLAS from those
@@ -331,34 +340,31 @@ def _in_child(kind: str, target, observe: list[str], **kwargs) -> LibcosimResult
     import sys
 
     root = Path(__file__).resolve().parents[2]   # the folder holding the cosim package
-    with tempfile.TemporaryDirectory(prefix="libcosim_run_") as tmp:
-        request, answer = Path(tmp) / "request.pkl", Path(tmp) / "result.pkl"
-        request.write_bytes(pickle.dumps((kind, target, observe, kwargs)))
+    with tempfile.TemporaryDirectory(prefix=f"{tool}_run_") as tmp:
+        request_file, answer = Path(tmp) / "request.pkl", Path(tmp) / "result.pkl"
+        request_file.write_bytes(pickle.dumps(request))
         env = dict(os.environ)
-        env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+        env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join([str(root)] + [p for p in [env.get("PYTHONPATH")] if p])
-        proc = subprocess.run([sys.executable, "-m", "cosim.peers.libcosim", str(request), str(answer)],
+        proc = subprocess.run([sys.executable, "-m", module, str(request_file), str(answer)],
                               env=env, cwd=tmp, capture_output=True, text=True)
         if not answer.exists():
             tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
-            raise LibcosimError(f"libcosim child process failed (exit code {proc.returncode}):\n{tail}")
+            raise error(f"{tool} child process failed (exit code {proc.returncode}):\n{tail}")
         status, payload = pickle.loads(answer.read_bytes())
     if status == "error":
-        raise LibcosimError(payload)
+        raise error(payload)
     return payload
 
 
-def _child_main(request: str, answer: str) -> None:
+def answer_child(request: str, answer: str, work) -> None:
+    """The child side of :func:`run_isolated`: ``work(*request)`` pickled to ``answer``."""
     import os
     import pickle
     import traceback
 
-    kind, target, observe, kwargs = pickle.loads(Path(request).read_bytes())
     try:
-        if kind == "system":
-            result = ("ok", run_system(target, observe, isolate=False, **kwargs))
-        else:
-            result = ("ok", run_ssp(target, observe, isolate=False, **kwargs))
+        result = ("ok", work(*pickle.loads(Path(request).read_bytes())))
     except Exception as exc:  # carried back to the parent as text
         result = ("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}")
     partial = Path(answer).with_suffix(".partial")
@@ -369,7 +375,16 @@ def _child_main(request: str, answer: str) -> None:
     os._exit(0)
 
 
-if __name__ == "__main__":   # the child process of _in_child (a protocol, not a command line)
+def _child_main(request: str, answer: str) -> None:
+    def work(kind, target, observe, kwargs):
+        if kind == "system":
+            return run_system(target, observe, isolate=False, **kwargs)
+        return run_ssp(target, observe, isolate=False, **kwargs)
+
+    answer_child(request, answer, work)
+
+
+if __name__ == "__main__":   # the child process of run_isolated (a protocol, not a command line)
     import sys
 
     if len(sys.argv) != 3 or sys.argv[1].startswith("-"):

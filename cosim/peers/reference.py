@@ -26,7 +26,17 @@ phase change, located by ``solve_ivp``'s root finder on the dense output:
 * ``approach``: maximum penetration when ``delta'`` falls through 0 (the dashpot of the
   Jankowski-type laws switches off; the regularised proposed model has a force drop);
 * ``restitution``: separation when ``delta`` falls through 0, or a new approach when
-  ``delta'`` rises through 0 again (a building pushing back during a long contact).
+  ``delta'`` rises through 0 again (a building pushing back during a long contact);
+* ``stick``: ``delta'`` held at 0 by the contact force that keeps it there, for a law whose
+  force drops at ``delta' = 0`` (``LawSpec.sticks``; crvk: the approach branch's force is
+  above the restitution branch's).  When the buildings push the bodies together with a force between the two
+  branches at the same penetration, neither branch is consistent: on the approach branch the
+  bodies would be pushed apart at once (``delta'' < 0``), on the restitution branch pushed
+  together (``delta'' > 0``).  The solution is Filippov's sliding motion: the penetration
+  stays, the force is the buildings' push.  It ends when that push exceeds the approach
+  branch (loading again: ``approach``) or falls below the restitution branch (unloading:
+  ``restitution``).  Entered from ``restitution`` at a re-approach and from ``approach`` at
+  maximum penetration, whenever the branch the event points to is inconsistent at once.
 
 Within a segment the right-hand side is smooth, so the integrator's order is not spoiled by
 a kink hidden inside a step.  The ground acceleration of a :class:`~fmu_src.ground_records.Record`
@@ -70,7 +80,7 @@ from scipy.optimize import minimize_scalar
 
 from ..master.models import contact_law, ground_record, initial_state, shear_building
 
-OPEN, APPROACH, RESTITUTION = "open", "approach", "restitution"
+OPEN, APPROACH, RESTITUTION, STICK = "open", "approach", "restitution", "stick"
 METHODS = ("DOP853", "Radau", "RK45", "BDF", "LSODA")
 
 
@@ -270,9 +280,49 @@ class _System:
         delta, rate = self.kinematics(y)
         forces = np.zeros(len(self.contacts))
         for c, contact in enumerate(self.contacts):
-            if phases[c] != OPEN and delta[c] > 0.0:
+            if phases[c] not in (OPEN, STICK) and delta[c] > 0.0:
                 forces[c] = contact.law.force(delta[c], rate[c], v_imp[c], approaching=phases[c] == APPROACH)
+        stuck = [c for c, p in enumerate(phases) if p == STICK]
+        if stuck:
+            forces[stuck] = self.holding_forces(y, forces, stuck)
         return forces, rate
+
+    def free_rates(self, y, forces):
+        """``delta''`` of every contact with the given contact forces [N] (the ground cancels)."""
+        n = self.n
+        f = -(self.K @ y[:n]) - self.C @ y[n:2 * n]
+        np.subtract.at(f, self.dof_left, forces)
+        np.add.at(f, self.dof_right, forces)
+        a = self.minv * f
+        return a[self.dof_left] - a[self.dof_right]
+
+    def holding_forces(self, y, forces, stuck):
+        """Forces [N] of the contacts ``stuck`` that keep their ``delta'' = 0`` (``forces``: the
+        others'): ``delta''_S = delta''_S(0) - G_SS F_S`` with ``G = B M^-1 B'``, ``B`` the
+        contacts' +1/-1 incidence on the floors."""
+        trial = forces.copy()
+        trial[stuck] = 0.0
+        free = self.free_rates(y, trial)[stuck]
+        G = np.empty((len(stuck), len(stuck)))
+        for i, c in enumerate(stuck):
+            for j, d in enumerate(stuck):
+                G[i, j] = sum(self.minv[p] * s * t for p, s in ((self.dof_left[c], 1.0), (self.dof_right[c], -1.0))
+                              for q, t in ((self.dof_left[d], 1.0), (self.dof_right[d], -1.0)) if p == q)
+        return np.linalg.solve(G, free)
+
+    def branch_rates(self, y, phases, v_imp, c):
+        """``delta''`` of contact ``c`` at ``delta' = 0`` on its approach and on its
+        restitution branch, the other contacts in their phases."""
+        out = []
+        for branch in (APPROACH, RESTITUTION):
+            trial = list(phases)
+            trial[c] = branch
+            forces, _ = self.contact_forces(y, trial, v_imp)
+            delta = self.kinematics(y)[0][c]
+            forces[c] = self.contacts[c].law.force(delta, 0.0, v_imp[c], approaching=branch == APPROACH) \
+                if delta > 0.0 else 0.0
+            out.append(float(self.free_rates(y, forces)[c]))
+        return out
 
     def rhs(self, phases, v_imp):
         n = self.n
@@ -357,6 +407,19 @@ class _System:
                 out.append((_event(delta, +1), c, "onset"))
             elif phases[c] == APPROACH:
                 out.append((_event(rate, -1), c, "max_penetration"))
+            elif phases[c] == STICK:
+                law, v = contact.law, float(v_imp[c])
+
+                def held(t, y, c=c):
+                    return self.contact_forces(y, phases, v_imp)[0][c]
+
+                def loading(t, y, c=c, law=law, v=v, i=i, j=j, gap=gap):
+                    return held(t, y) - law.force(y[i] - y[j] - gap, 0.0, v, approaching=True)
+
+                def unloading(t, y, c=c, law=law, v=v, i=i, j=j, gap=gap):
+                    return held(t, y) - law.force(y[i] - y[j] - gap, 0.0, v, approaching=False)
+                out.append((_event(loading, +1), c, "loading"))
+                out.append((_event(unloading, -1), c, "unloading"))
             else:
                 out.append((_event(delta, -1), c, "separation"))
                 out.append((_event(rate, +1), c, "reapproach"))
@@ -366,6 +429,31 @@ class _System:
                         return law.raw_force(y[i] - y[j] - gap, y[n + i] - y[n + j], v, approaching=False)
                     out.append((_event(raw, -1), c, "force_separation"))
         return out
+
+    def next_branch(self, y, phases, v_imp, c, kind) -> str:
+        """Phase of contact ``c`` after a branch event at ``delta' = 0`` (module docstring).
+
+        ``max_penetration``/``unloading`` point to restitution, ``reapproach``/``loading`` to
+        approach; either is taken if consistent (restitution: ``delta'' <= 0``; approach:
+        ``delta'' >= 0``), else the contact sticks if sticking is consistent (the holding force
+        between the two branches), else the other branch.  A law that cannot stick
+        (``LawSpec.sticks``: the two branches' forces are equal at ``delta' = 0``) takes the
+        branch the event points to."""
+        wants = RESTITUTION if kind in ("max_penetration", "unloading") else APPROACH
+        law = self.contacts[c].law
+        if not (law.spec.sticks and law.zeta > 0.0):
+            return wants
+        on_approach, on_restitution = self.branch_rates(y, phases, v_imp, c)
+        # an event leaves the state on a boundary: a rate within round-off of 0 (1e-9 of the
+        # branches' difference) counts as 0, or the contact would stick and leave again at once
+        tol = 1e-9 * (abs(on_approach) + abs(on_restitution))
+        if wants == RESTITUTION and on_restitution <= tol:
+            return RESTITUTION
+        if wants == APPROACH and on_approach >= -tol:
+            return APPROACH
+        if on_approach < -tol and on_restitution > tol:
+            return STICK
+        return APPROACH if wants == RESTITUTION else RESTITUTION
 
     def stored_energy(self, delta):
         """Elastic energy ``k delta^(n+1) / (n+1)`` held by each contact (J)."""
@@ -544,8 +632,8 @@ class _Integration:
             self.first_step = min(self.first_step, t_end - t)
         event_list = system.events(phases, v_imp, self.overlap)
         kwargs = {}
-        if self.method in ("Radau", "BDF", "LSODA"):
-            kwargs["jac"] = system.jacobian(phases, v_imp)
+        if self.method in ("Radau", "BDF", "LSODA") and STICK not in phases:
+            kwargs["jac"] = system.jacobian(phases, v_imp)   # (finite differences while a contact sticks)
         sol = solve_ivp(system.rhs(phases, v_imp), (t, t_end), y, method=self.method, rtol=self.rtol,
                         atol=self.atol, events=[e[0] for e in event_list], dense_output=True,
                         first_step=self.first_step, max_step=self.max_step, **kwargs)
@@ -598,10 +686,8 @@ class _Integration:
                                         max_penetration=0.0, work0=float(y[2 * n + 2 + c]))
             if rate[c] <= 0.0:   # grazing contact: no approach phase
                 phases[c] = RESTITUTION
-        elif kind == "max_penetration":
-            phases[c] = RESTITUTION
-        elif kind == "reapproach":
-            phases[c] = APPROACH
+        elif kind in ("max_penetration", "reapproach", "loading", "unloading"):
+            phases[c] = system.next_branch(y, phases, self.v_imp, c, kind)
         elif kind == "parted":
             self.overlap[c] = False
         elif kind in ("separation", "force_separation"):
@@ -688,6 +774,8 @@ def _segment_peaks(system: _System, sol, c: int, phases, v_imp) -> tuple[float, 
 
     def force_at(tt):
         y = sol.sol(tt)
+        if phases[c] == STICK:
+            return float(system.contact_forces(y, phases, v_imp)[0][c])
         delta, rate = system.kinematics(y)
         return system.contacts[c].law.force(delta[c], rate[c], v_imp[c], approaching=phases[c] == APPROACH)
 

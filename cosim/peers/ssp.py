@@ -16,8 +16,11 @@ tools).  This module has two layers:
 What SSP 1.0 can and cannot say (see :class:`NotExpressibleError`):
 
 * structure, start values of parameters and inputs, connections with a linear
-  transformation ``target = factor * source + offset`` (we use ``factor = -1`` for
-  the reaction of a contact force on the building on the negative side): yes;
+  transformation ``target = factor * source + offset``: yes, but several SSP readers
+  ignore the transformation (FMPy 0.3's runner), so the export needs none: each contact
+  hands out the signed force on each body, ``F1`` (= -F, body 1) and ``F2`` (= F, body 2);
+* parameter sets: every component's start values are one parameter set named
+  :data:`PARAMETER_SET`, because Ecos applies a single named set (libcosim applies all);
 * the order in which a master steps the components, iterations, rollback and
   step-size control: no.  SSP leaves the algorithm to the importing tool.  The fixed
   communication step goes into the OSP annotation of ``DefaultExperiment`` (read by
@@ -57,6 +60,13 @@ OSP_ANNOTATION = "com.opensimulationplatform"
 OUR_ANNOTATION = "org.pounding-cosim"
 FMU_MIME = "application/x-fmu-sharedlibrary"
 SSD_NAME = "SystemStructure.ssd"
+#: the name of the one parameter set every component's start values belong to (Ecos applies
+#: the set it is told to, by name; libcosim applies every set)
+PARAMETER_SET = "scene"
+#: what the export declares as the contacts' host (pounding.fmu parameter ``host``) when the
+#: scene leaves it unset: the SSP tools run a fixed-step Jacobi algorithm (libcosim, Ecos)
+#: around building.fmu, which is exact for a held force
+EXPORTED_HOST = "zoh_late"
 
 Value = bool | int | float | str
 
@@ -314,7 +324,7 @@ def build_ssd(system: System, sources: Mapping[str, str] | None = None) -> bytes
             bindings = etree.SubElement(el, ssd("ParameterBindings"))
             binding = etree.SubElement(bindings, ssd("ParameterBinding"))
             values = etree.SubElement(binding, ssd("ParameterValues"))
-            pset = etree.SubElement(values, ssv("ParameterSet"), version="1.0", name=f"{comp.name}")
+            pset = etree.SubElement(values, ssv("ParameterSet"), version="1.0", name=PARAMETER_SET)
             params = etree.SubElement(pset, ssv("Parameters"))
             set_units = set()
             for name, value in comp.start_values.items():
@@ -493,7 +503,9 @@ def scene_system(scene, fmu_dir: Path | str) -> System:
     outputs (a floor pounded by two contact instances).
     """
     fmu_dir = Path(fmu_dir)
-    components = tuple(Component(spec.name, fmu_dir / f"{spec.fmu}.fmu", dict(spec.parameters))
+    components = tuple(Component(spec.name, fmu_dir / f"{spec.fmu}.fmu",
+                                 {**({"host": EXPORTED_HOST} if spec.fmu == POUNDING and "host" not in spec.parameters
+                                     else {}), **spec.parameters})
                        for spec in scene.instances())
     connections = tuple(Connection(c.source, c.output, c.target, c.input, factor=float(c.factor))
                         for c in scene.connections())
@@ -508,7 +520,8 @@ def scene_system(scene, fmu_dir: Path | str) -> System:
                 f"but an SSP 1.0 connection carries one output to one input and cannot add signals. "
                 f"Not exportable: pound that floor from one side only, or use separate floors")
     annotation = {"format": 1, "description": scene.description, "coupling": scene.coupling,
-                  "allow_initial_overlap": bool(scene.allow_initial_overlap)}
+                  "allow_initial_overlap": bool(scene.allow_initial_overlap),
+                  "declared_host": {spec.name: EXPORTED_HOST for spec in scene.contacts if "host" not in spec.parameters}}
     return System(name=scene.name, components=components, connections=connections, start_time=0.0,
                   stop_time=float(scene.stop_time), step_size=float(scene.step), annotation=annotation)
 
@@ -521,7 +534,8 @@ def export_notes(scene) -> list[str]:
             f"coupling = {scene.coupling!r} is not expressible in SSP 1.0, which describes structure and "
             f"parameters, not the order in which a master steps the components; it is kept in the "
             f"{OUR_ANNOTATION!r} annotation (used by cosim.peers.ssp.load_ssp, ignored by other tools). "
-            f"libcosim runs the package with its fixed-step Jacobi algorithm at h = {scene.step:g} s")
+            f"libcosim and Ecos run the package with their fixed-step Jacobi algorithm at h = {scene.step:g} s "
+            f"(the contacts are declared host = {EXPORTED_HOST!r} for it)")
     if scene.ground is not None:
         record = str(scene.ground.parameters.get("record", ""))
         if any(sep in record for sep in ("/", "\\")) or Path(record).suffix:
@@ -563,7 +577,12 @@ def load_ssp(path: Path | str, extract_to: Path | str):
         if kind not in (GROUND, BUILDING, POUNDING):
             raise NotExpressibleError(f"{path}: component {name!r} uses {kind}.fmu, which is not one of "
                                       f"{GROUND}.fmu, {BUILDING}.fmu, {POUNDING}.fmu")
-    specs = {c.name: InstanceSpec(c.name, kinds[c.name], dict(c.start_values)) for c in system.components}
+    ann = dict(system.annotation or {})
+    declared = ann.get("declared_host", {})
+    # the host the export declared for the SSP tools goes: our master declares its own
+    specs = {c.name: InstanceSpec(c.name, kinds[c.name], {k: v for k, v in c.start_values.items()
+                                                          if not (k == "host" and declared.get(c.name) == v)})
+             for c in system.components}
     grounds = [specs[n] for n, k in kinds.items() if k == GROUND]
     if len(grounds) > 1:
         raise NotExpressibleError(f"{path}: {len(grounds)} ground-motion components; a scene has at most one")
@@ -581,7 +600,6 @@ def load_ssp(path: Path | str, extract_to: Path | str):
                                           f"displacement x[i]")
             ends.append((con.start_element, floor))
         levels.append(ContactLevel(contact.name, ends[0][0], ends[1][0], ends[0][1], ends[1][1]))
-    ann = dict(system.annotation or {})
     coupling = ann.get("coupling", "jacobi")
     if coupling not in COUPLINGS:
         raise ValueError(f"{path}: annotation coupling = {coupling!r} is not one of {', '.join(COUPLINGS)}")

@@ -111,6 +111,7 @@ class Adaptive(CouplingStrategy):
     """
 
     name = "adaptive"
+    host = "zoh"        # Gauss-Seidel: building.fmu holds F exactly over the step it was computed for
 
     def __init__(self, system: "System", t0: float, t_bound: float, step: float, *,
                  contact_fraction: float | None = None, max_halvings: int = 16, accel_safety: float = 2.0,

@@ -52,6 +52,10 @@ class CouplingStrategy:
     """
 
     name = "base"
+    #: how the buildings receive a contact's force under this strategy: the pounding.fmu
+    #: parameter ``host`` (fmu_src.host_observer.HOSTS) the master declares for every contact whose
+    #: scene leaves it unset; "any" lets the contact measure it
+    host = "any"
 
     def __init__(self, system: "System", t0: float, t_bound: float, step: float):
         if not (step > 0 and math.isfinite(step)):

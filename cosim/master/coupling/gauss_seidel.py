@@ -17,6 +17,7 @@ class GaussSeidel(CouplingStrategy):
     """Sequential: ground, then contacts (from the buildings at t), then buildings."""
 
     name = "gauss-seidel"
+    host = "zoh"        # building.fmu holds F exactly over the step it was computed for
 
     def __init__(self, system: "System", t0: float, t_bound: float, step: float):
         super().__init__(system, t0, t_bound, step)
