@@ -85,7 +85,8 @@ def cmd_run(args) -> int:
 
     run = run_scene(args.scene, _overrides(args.overrides), out=args.out, coupling=args.coupling, step=args.step,
                     stop_time=args.stop_time, fmu_dir=args.fmu_dir, plots=not args.no_plots,
-                    progress=False if args.no_progress else None, parquet=args.parquet)
+                    progress=False if args.no_progress else None, parquet=args.parquet,
+                    energy_limit=args.energy_limit, creation_limit=args.creation_limit)
     print(format_summary(run.summary))
     print(f"results: {run.folder}")
     return EXIT_OK
@@ -249,7 +250,7 @@ def cmd_build_fmus(args) -> int:
     if unknown:
         raise BadInput(f"unknown FMU {sorted(unknown)}; known: {sorted(FMU_NAMES)}")
     out = args.out if args.out is not None else fmu_folder()
-    print(f"Building FMUs into {out}")
+    print(f"FMUs in {out}:")
     build_all(out, force=args.force, names=tuple(args.names) or None, quiet=False)
     return EXIT_OK
 
@@ -285,6 +286,17 @@ def cmd_opensees(args) -> int:
 
 
 # -- the parser ------------------------------------------------------------------------------------
+def _fraction(text: str) -> float:
+    """A fraction 0 < value < 1 (argparse type): refused with the value and the range otherwise."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (allowed: 0 < value < 1)") from None
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is outside the allowed range 0 < value < 1")
+    return value
+
+
 def _scene_options(p: argparse.ArgumentParser, run: bool = True) -> None:
     from .master.coupling import STRATEGIES
 
@@ -300,6 +312,7 @@ def _scene_options(p: argparse.ArgumentParser, run: bool = True) -> None:
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     """The parser and its subcommands' parsers (by name)."""
     from .fmus import FMU_NAMES
+    from .master.results import ENERGY_CREATION_LIMIT, ENERGY_RESIDUAL_LIMIT
     from .master.runner import DEFAULT_SCENE
     from .peers.opensees import MATERIALS
 
@@ -324,6 +337,11 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--parquet", action="store_true",
                    help="also write history.parquet (units and descriptions in the column metadata)")
+    p.add_argument("--energy-limit", type=_fraction, default=ENERGY_RESIDUAL_LIMIT, metavar="FRACTION",
+                   help="warn when |energy residual| exceeds this fraction of the input energy (default: %(default)g)")
+    p.add_argument("--creation-limit", type=_fraction, default=ENERGY_CREATION_LIMIT, metavar="FRACTION",
+                   help="warn that the run created energy when the residual is below minus this fraction of the "
+                        "input energy (default: %(default)g)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.add_argument("--list", action="store_true", help="list the bundled scenes and exit")
     p.add_argument("--accuracy", action="store_true",
@@ -395,7 +413,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--set", dest="fixed", action="append", default=[], metavar="INSTANCE.VAR=VALUE",
                    help="one more fixed override for every case (repeatable), e.g. stop_time=5")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
-    p.add_argument("--dry-run", action="store_true", help="check the study and list the cases, run nothing")
+    p.add_argument("--dry-run", action="store_true", help="check the study and print its number of cases and what varies, run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     p = add("study-plot", cmd_study_plot, "plot a summary column of a study against a varied variable "

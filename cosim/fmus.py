@@ -212,6 +212,12 @@ class {spec.class_name}(_Slave):
 
 
 # -- building ------------------------------------------------------------------------------------------
+def up_to_date(spec: FmuSpec, out: Path | str, source: Path = SOURCE) -> bool:
+    """True when ``out`` holds ``spec``'s FMU built from the current sources (its stamp matches)."""
+    target, stamp = Path(out) / f"{spec.name}.fmu", Path(out) / f".{spec.name}.sha256"
+    return target.exists() and stamp.exists() and stamp.read_text() == source_digest(spec, source)
+
+
 def build_one(spec: FmuSpec, out: Path | str, force: bool = False, source: Path = SOURCE) -> Path:
     """Build one FMU into ``out`` unless an up-to-date one is there; returns its path."""
     from fmu_src.fmi_slave import HOST_REQUIREMENTS
@@ -221,7 +227,7 @@ def build_one(spec: FmuSpec, out: Path | str, force: bool = False, source: Path 
     digest = source_digest(spec, source)
     target = out / f"{spec.name}.fmu"
     stamp = out / f".{spec.name}.sha256"
-    if not force and target.exists() and stamp.exists() and stamp.read_text() == digest:
+    if not force and up_to_date(spec, out, source):
         return target
     out.mkdir(parents=True, exist_ok=True)
     package = package_name(spec, digest)
@@ -267,9 +273,11 @@ def build_all(out: Path | str | None = None, force: bool = False, names: Sequenc
     for spec in FMUS:
         if names is not None and spec.name not in names:
             continue
+        skipped = not force and up_to_date(spec, out)
         built[spec.name] = build_one(spec, out, force=force)
         if not quiet:
-            print(f"  {spec.name + '.fmu':<20} {spec.summary}  -> {built[spec.name]}")
+            state = "up to date, not rebuilt" if skipped else "built"
+            print(f"  {spec.name + '.fmu':<20} {spec.summary}  -> {built[spec.name]} ({state})")
     return built
 
 

@@ -434,9 +434,21 @@ def _building_summary(result: SimulationResult, name: str, n: int,
         peak_accelerations_m_s2=tuple(map(float, a)))
 
 
-def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = None) -> Summary:
+#: |energy residual| / input energy above which a run ends with a warning (issue 15: 1 %); the
+#: bundled scenes at their settings stay below 0.2 % (docs/accuracy.md)
+ENERGY_RESIDUAL_LIMIT = 0.01
+#: -residual / input energy above which the run is said to have created energy: the residual of a
+#: consistent co-simulation is the contact's stored elastic energy plus its coupling error, >= 0
+#: at the bundled scenes' settings (0 to +0.2 %); 0.1 % leaves room for round-off and the end of a
+#: run inside an impact
+ENERGY_CREATION_LIMIT = 0.001
+
+
+def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = None, *,
+              energy_limit: float = ENERGY_RESIDUAL_LIMIT, creation_limit: float = ENERGY_CREATION_LIMIT) -> Summary:
     """The numbers a person wants from a run (SI units in the names).  ``provenance``: what the run
-    was made with (:func:`cosim.master.provenance.provenance`), kept as it is."""
+    was made with (:func:`cosim.master.provenance.provenance`), kept as it is.  ``energy_limit``
+    and ``creation_limit`` (fractions of the input energy) set when :func:`accuracy_warnings` speaks."""
     scene = result.scene
     contacts = {c.name: _contact_summary(result, c.name) for c in scene.contacts}
     spikes = contact_floor_accelerations(result)
@@ -456,7 +468,8 @@ def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = N
         energy_strain_J=float(e["strain"][-1]), energy_damping_J=float(e["damping"][-1]),
         energy_contact_J=float(e["contact"][-1]), energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
-        cost=result.cost, warnings=sampling_warnings(contacts),
+        cost=result.cost, warnings=sampling_warnings(contacts) + accuracy_warnings(
+            residual, energy_in, result.strategy, scene.step, energy_limit, creation_limit),
         system=system_description(scene, _final(result, column(scene.ground.name, "pga")) if scene.ground else None),
         overrides=list(scene.overrides), scene_as_run=scene.as_run(), provenance=dict(provenance or {}))
 
@@ -507,5 +520,29 @@ def sampling_warnings(contacts: Mapping[str, ContactSummary]) -> list[str]:
         if ratio > SAMPLING_WARNING:
             out.append(f"{name}: plain force law stepped at up to {ratio:.2g} times the impact time scale: "
                        f"expect its dissipated energy off by about {ratio:.0%} at CR 0.65 (more at higher CR), "
-                       f"its peak force by less (docs/accuracy.md); use resolve_impacts=true or coupling=\"adaptive\"")
+                       f"its peak force by less, and impacts shorter than a few steps can be missed or merged "
+                       f"(docs/accuracy.md); use resolve_impacts=true or coupling=\"adaptive\"")
+    return out
+
+
+def accuracy_warnings(residual: float, energy_in: float, coupling: str, step: float,
+                      energy_limit: float = ENERGY_RESIDUAL_LIMIT,
+                      creation_limit: float = ENERGY_CREATION_LIMIT) -> list[str]:
+    """Warnings where a completed run lost accuracy: its energy balance residual (J) beyond
+    ``energy_limit`` of the input energy (J), or energy created (residual below
+    ``-creation_limit`` of it); each says what to change."""
+    if energy_in <= 0.0:
+        return []
+    ratio = residual / energy_in
+    remedy = (f"use coupling = \"adaptive\" (or \"gauss-seidel\") or a smaller step than h = {step:g} s"
+              if coupling == "jacobi" else f"use a smaller step than h = {step:g} s")
+    out = []
+    if ratio < -creation_limit:
+        out.append(f"the run created energy: the energy balance residual is {100 * ratio:.3g} % of the input "
+                   f"(limit -{100 * creation_limit:.3g} %, --creation-limit): a contact force handed "
+                   f"over late or too coarsely; {remedy}")
+    elif abs(ratio) > energy_limit:
+        out.append(f"energy balance residual {100 * ratio:.3g} % of the input (limit {100 * energy_limit:.3g} %, "
+                   f"--energy-limit): the coupling lost accuracy, expect the impacts and peaks to be off too; "
+                   f"{remedy}")
     return out

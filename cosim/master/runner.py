@@ -19,7 +19,7 @@ from ..fmus import default_fmu_dir
 from .loader import load_scene
 from .output import write_results
 from .provenance import provenance
-from .results import RunResult, summarize
+from .results import ENERGY_CREATION_LIMIT, ENERGY_RESIDUAL_LIMIT, RunResult, summarize
 from .scene import Override
 from .simulate import simulate
 from .system import Catalog, System
@@ -44,7 +44,9 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
               out: str | Path | None = None, coupling: str | None = None, step: float | None = None,
               stop_time: float | None = None, fmu_dir: str | Path | None = None,
               catalog: Catalog | None = None, write: bool = True, plots: bool = True,
-              progress: bool | None = None, parquet: bool = False, **strategy_options: Any) -> RunResult:
+              progress: bool | None = None, parquet: bool = False,
+              energy_limit: float = ENERGY_RESIDUAL_LIMIT, creation_limit: float = ENERGY_CREATION_LIMIT,
+              **strategy_options: Any) -> RunResult:
     """Load, validate and run a scene; write its results unless ``write=False``.
 
     ``overrides``: :class:`~cosim.master.scene.Override` objects (or their text form,
@@ -54,7 +56,8 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
     :class:`~cosim.master.fmi.FMUError` (an FMU refused a parameter or a step) before
     anything is written, :class:`~cosim.master.guard.InstabilityError` when the stability
     guard stops the run.  ``catalog`` reuses already loaded FMUs; ``parquet`` also writes
-    ``history.parquet``.
+    ``history.parquet``; ``energy_limit``, ``creation_limit``: when the summary warns of lost
+    accuracy (:func:`~cosim.master.results.accuracy_warnings`).
     """
     own_catalog = catalog is None
     if own_catalog:
@@ -67,7 +70,7 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
     finally:
         if own_catalog:
             catalog.close()
-    summary = summarize(result, made_with)
+    summary = summarize(result, made_with, energy_limit=energy_limit, creation_limit=creation_limit)
     folder = None
     if write:
         folder = write_results(result, Path(out) if out else Path("out") / loaded.name, plots=plots,
