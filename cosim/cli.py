@@ -413,7 +413,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--set", dest="fixed", action="append", default=[], metavar="INSTANCE.VAR=VALUE",
                    help="one more fixed override for every case (repeatable), e.g. stop_time=5")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
-    p.add_argument("--dry-run", action="store_true", help="check the study and print its number of cases and what varies, run nothing")
+    p.add_argument("--dry-run", action="store_true",
+                   help="check the study and print its number of cases and what varies, run nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     p = add("study-plot", cmd_study_plot, "plot a summary column of a study against a varied variable "

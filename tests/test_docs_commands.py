@@ -66,7 +66,7 @@ def documented_commands() -> list[tuple[str, str, list[str]]]:
                 SCRIPTS.append((path.name, line, script))     # benchmarks, CI: too long to run here
                 continue
             else:
-                raise AssertionError(f"{path.name}: {line!r} is neither a command of the package nor a known setup line")
+                raise AssertionError(f"{path.name}: {line!r} is neither a command of the package nor a setup line")
             if argv:                                        # the bare program name is prose
                 out.append((path.name, line, argv))
     return out
