@@ -3,6 +3,7 @@
     pounding-cosim run [SCENE] [--set INSTANCE.VAR=VALUE ...] [--out DIR] ...   # default scene -> out/default/
     pounding-cosim list                                  # bundled scenes and studies
     pounding-cosim study STUDY [--workers N] [--resume] ...; pounding-cosim study plot RESULTS.csv --x ... --y ...
+    pounding-cosim study compare RESULTS.csv --x ... --pair ... --y ... --out DIR
     pounding-cosim calibrate --model crvk --m1 200 --m2 200 --k 1.8974e11 --v 10 --cr 0.4
     pounding-cosim report --out docs/reproduction [--quick]
     pounding-cosim accuracy SCENE [--out DIR]
@@ -43,7 +44,7 @@ class BadInput(Exception):
 def exit_code(exc: BaseException) -> int:
     """The exit code of a command that raised ``exc`` (the one mapping of the package)."""
     from .apps.calibrate import CalibrationError
-    from .apps.study import StudyError
+    from .apps.study import ClusterLost, StudyError
     from .master import FMUError, InstabilityError, SceneError
     from .peers.ssp import NotExpressibleError
 
@@ -53,6 +54,8 @@ def exit_code(exc: BaseException) -> int:
         # parameters and records are checked at initialisation: that is bad input too
         return EXIT_FAILED if exc.function == "fmi2DoStep" else EXIT_BAD_INPUT
     if isinstance(exc, InstabilityError):   # the run went unphysical: nothing was written
+        return EXIT_FAILED
+    if isinstance(exc, ClusterLost):   # a study's scheduler (or every able worker) went away: rows kept
         return EXIT_FAILED
     if isinstance(exc, (BadInput, SceneError, StudyError, CalibrationError, NotExpressibleError,
                         FileNotFoundError, FileExistsError)):
@@ -184,25 +187,42 @@ def cmd_export_ssp(args) -> int:
 
 def cmd_study_run(args) -> int:
     from .apps.study import StudyError, load_study, run_study, validate_study
-    from .master import Catalog
+    from .apps.study.cases import fixed_text
+    from .master import Catalog, Override
 
-    study = load_study(args.study, _overrides(args.fixed))
+    if args.max_cases < 1:
+        raise StudyError(f"--max-cases {args.max_cases}: needs at least 1 case")
+    study = load_study(args.study, _overrides(args.fixed), max_cases=args.max_cases)
     if args.dry_run:
-        with Catalog(_fmu_dir(args.fmu_dir)) as catalog:
+        from .apps.study.cluster import ctrl_c_deferred
+
+        with ctrl_c_deferred(), Catalog(_fmu_dir(args.fmu_dir)) as catalog:   # the FMUs run here
             validate_study(study, catalog)
         print(f"{study.name}: {study.n_cases} cases of scene {study.scene}, varying "
               + " x ".join("(" + ", ".join(a.variables) + f": {len(a)})" for a in study.axes))
+        print(f"{'case':>6}  {'case_id':<12}  values")
+        for case in study.cases():
+            print(f"{case.index:>6}  {case.id:<12}  "
+                  + "  ".join(fixed_text(Override.of(k, v)) for k, v in case.values.items()))
         return EXIT_OK
     if args.workers is not None and args.workers < 1:
         raise StudyError(f"--workers {args.workers}: needs at least 1 worker")
     try:
         result = run_study(study, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-                           fmu_dir=args.fmu_dir, progress=not args.no_progress)
+                           retry_failed=args.retry_failed, fmu_dir=args.fmu_dir, progress=not args.no_progress)
     except KeyboardInterrupt:
         print("interrupted: the finished cases are in the results; complete them with --resume", file=sys.stderr)
         return EXIT_INTERRUPTED
+    for worker in result.unfit_workers:
+        print(f"note: a worker that joined cannot run the cases, its cases ran on the others: {worker}")
+    if result.stale_lock:
+        from .apps.study.lock import describe
+
+        print(f"note: took over the lock of a study that no longer runs ({describe(result.stale_lock)})")
     print(f"{study.name}: {result.n_cases} cases, {result.skipped} already done, {result.ran} run now "
-          f"({result.failed} failed or unstable) in {result.elapsed_s:.1f} s on {result.workers} workers")
+          + (f"({result.retried} of them failed or unstable before) " if result.retried else "")
+          + f"({result.failed} failed or unstable)"
+          + (f" in {result.elapsed_s:.1f} s on {result.workers} workers" if result.ran else ""))
     print(f"results: {result.csv}\n         {result.parquet}")
     return EXIT_OK
 
@@ -212,6 +232,14 @@ def cmd_study_plot(args) -> int:
 
     path = plot_results(args.results, args.x, args.y, args.by, args.where, args.out, args.logy)
     print(f"plot: {path}")
+    return EXIT_OK
+
+
+def cmd_study_compare(args) -> int:
+    from .apps.study.compare import write_comparison
+
+    md, png = write_comparison(args.results, args.x, args.pair, args.panels, args.y, args.out)
+    print(f"table: {md}\nplot: {png}")
     return EXIT_OK
 
 
@@ -311,6 +339,7 @@ def _scene_options(p: argparse.ArgumentParser, run: bool = True) -> None:
 
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     """The parser and its subcommands' parsers (by name)."""
+    from .apps.study.spec import MAX_CASES as STUDY_MAX_CASES
     from .fmus import FMU_NAMES
     from .master.results import ENERGY_CREATION_LIMIT, ENERGY_RESIDUAL_LIMIT
     from .master.runner import DEFAULT_SCENE
@@ -409,12 +438,20 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="use the Dask cluster at this address instead")
     p.add_argument("--out", type=Path, help="result folder (default: out/studies/<study name>)")
-    p.add_argument("--resume", action="store_true", help="complete the results already in --out")
+    p.add_argument("--resume", action="store_true", help="complete the results already in --out: run only the "
+                                                         "cases without a row")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="with --resume (implied): also run again the cases whose rows are failed or unstable "
+                        "(their old rows are replaced)")
+    p.add_argument("--max-cases", type=int, default=STUDY_MAX_CASES, metavar="N",
+                   help="refuse a study of more than N cases (default %(default)s: about 70 min of one core "
+                        "with full records); raise it on purpose")
     p.add_argument("--set", dest="fixed", action="append", default=[], metavar="INSTANCE.VAR=VALUE",
                    help="one more fixed override for every case (repeatable), e.g. stop_time=5")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
     p.add_argument("--dry-run", action="store_true",
-                   help="check the study and print its number of cases and what varies, run nothing")
+                   help="check the study (every value on the FMUs) and print its cases, one line each "
+                        "(number, case_id, values); run nothing, write nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     p = add("study-plot", cmd_study_plot, "plot a summary column of a study against a varied variable "
@@ -427,6 +464,15 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                    help="keep only these rows (repeatable)")
     p.add_argument("--logy", action="store_true", help="logarithmic y axis")
     p.add_argument("--out", type=Path, help="PNG file (default: next to the CSV)")
+
+    p = add("study-compare", cmd_study_compare, "two variants of a study side by side: comparison.md (table) and "
+                                                "comparison.png (also: study compare)")
+    p.add_argument("results", type=Path, help="results.csv of a study")
+    p.add_argument("--x", required=True, help="varied column on the abscissa, e.g. pounding.gap")
+    p.add_argument("--pair", required=True, help="varied column with the two variants, e.g. left.hysteresis")
+    p.add_argument("--panels", help="one row of panels per value of this column, e.g. ground.record")
+    p.add_argument("--y", nargs="+", required=True, help="summary columns, e.g. peak_force_N impacts")
+    p.add_argument("--out", type=Path, required=True, help="folder for comparison.md and comparison.png")
 
     from fmu_src.contact_laws import MODELS
 
@@ -481,9 +527,9 @@ def main(argv: Sequence[str] | None = None, prog: str | None = None) -> int:
     """Run one command; returns its exit code.  ``prog``: a shim's name (``python cosim/run.py``),
     whose first argument is then the command."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:2] == ["study", "plot"]:
-        argv = ["study-plot", *argv[2:]]
-        prog = f"{prog} plot" if prog else None
+    if argv[:2] in (["study", "plot"], ["study", "compare"]):
+        prog = f"{prog} {argv[1]}" if prog else None
+        argv = [f"study-{argv[1]}", *argv[2:]]
     parser, subs = build_parser()
     if prog and argv and argv[0] in subs:
         subs[argv[0]].prog = prog

@@ -90,6 +90,9 @@ class BuildingState:
     E_damping: float = 0.0
     E_hysteretic: float = 0.0
     rk_step: float = 0.0      # Bouc-Wen: the last accepted Runge-Kutta step (s), the next first guess
+    # bilinear: the floor forces of the storeys' constant parts D' r (N), a cache of (mode, slip)
+    # cleared at every event (r does not depend on the slip of a yielding storey)
+    offset: np.ndarray | None = None
     # segments in which a peak may exceed ``peaks``, searched when the peaks are read
     # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
     pending: list = field(default_factory=list)
@@ -216,6 +219,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         super().__init__(building, hysteresis)
         self._configs: OrderedDict[bytes, Configuration] = OrderedDict()
         self.configurations_built = 0   # cost counter
+        # what a mode array implies, remembered for the array object last seen (a state's mode
+        # is replaced, never changed in place): (mode, configuration, elastic mask, any yielding)
+        self._mode_memo = None
         n = self.n
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
@@ -250,7 +256,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cfg = self._configs.get(key)
         if cfg is None:
             tangent = bilinear_tangent(self.k, self.alpha, mode) if self.hysteresis.inelastic else self.k
-            cfg = Configuration(self.masses, self.C, tangent)
+            cfg = Configuration(self.masses, self.C, tangent, elastic=not mode.any())
             if len(self._configs) >= MAX_CONFIGURATIONS:
                 self._configs.popitem(last=False)
             self._configs[key] = cfg
@@ -263,16 +269,27 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """``p = f - D' r``: external force minus the storeys' constant offsets (N)."""
         if not self.hysteresis.inelastic:
             return np.asarray(force, float)
-        r = bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode)
-        return force - _floor_forces(r)
+        if state.offset is None:
+            state.offset = _floor_forces(bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode))
+        return force - state.offset
+
+    def _mode_facts(self, mode: np.ndarray):
+        """``(mode, configuration, elastic mask, any storey yielding)`` of a mode array."""
+        memo = self._mode_memo
+        if memo is None or memo[0] is not mode:
+            elastic = mode == 0
+            memo = self._mode_memo = (mode, self.configuration(mode), elastic, not bool(elastic.all()))
+        return memo
 
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, state, times, ag, force) -> StepCost:
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
-        if not self.hysteresis.inelastic and times.size > 3:
-            return self._advance_linear(state, times, ag, force)    # worth batching
+        if times.size > 3:          # worth batching (None: an event may occur, interval by interval)
+            cost = self._advance_batch(state, times, ag, force)
+            if cost is not None:
+                return cost
         cost = StepCost()
         events = 0
         h = float(times[-1] - times[0])
@@ -289,66 +306,81 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cost.events = events
         return cost
 
-    def _advance_linear(self, state, times, ag, force) -> StepCost:
-        """A linear building over all the knot intervals of a step at once.
+    def _advance_batch(self, state, times, ag, force) -> StepCost | None:
+        """All the knot intervals of a step at once, in the current configuration (None, and
+        the state untouched, if a yield or unloading event may occur in the step).
 
         Without events the intervals only chain through the state: one matrix-vector product
         each (with the cached map of its length) carries the state across them; then one
         matrix product per distinct length gives every interval's energies and tier-1 test
-        quantities, and only the intervals whose test fails (a peak may grow) are looked at one
-        by one.  Same arithmetic as :meth:`_interval` per interval, without its per-interval
-        overhead (a step of 30 record intervals costs little more than one).
+        quantities (:meth:`_interval` explains them): an elastic storey must stay inside its
+        elastic range and a yielding storey keep its drift rate's sign in every interval, or the
+        step is left to :meth:`_interval`; only the intervals where a peak may grow are looked
+        at one by one.  Same arithmetic as :meth:`_interval` per interval, without its
+        per-interval overhead (a step of 30 record intervals costs little more than one).  A
+        yielding storey's drift is monotonic over the step, so its slip and dissipation follow
+        from the end drift as in :meth:`_commit`.
         """
         n = self.n
         cost = StepCost()
         lengths = np.diff(times)
         idx = np.flatnonzero(lengths > 0.0)          # equal times: a jump, no time passes
         count = idx.size
-        cfg = self.configuration(state.mode)
+        _, cfg, elastic, yielding = self._mode_facts(state.mode)
+        inelastic = self.hysteresis.inelastic
+        p = self._net_force(state, force)
         size = 3 * n + 2
         Y = np.empty((count, size))
         Y[:, 2 * n] = ag[idx]
         Y[:, 2 * n + 1] = (ag[idx + 1] - ag[idx]) / lengths[idx]
-        Y[:, 2 * n + 2:] = force
+        Y[:, 2 * n + 2:] = p
         maps = [cfg.segment_map(float(L)) for L in lengths[idx]]
         z = np.concatenate([state.u, state.v])
         for j in range(count):
             Y[j, :2 * n] = z
             z = maps[j].state @ Y[j]
-        cost.segments = count
         groups: dict[int, list[int]] = {}
         for j, smap in enumerate(maps):
             groups.setdefault(id(smap), []).append(j)
         e_damp = e_in = 0.0
         flagged = []
-        accel_offset = force * self._inv_m
+        accel_offset = p * self._inv_m
         peaks = state.peaks
         for js in groups.values():
             smap = maps[js[0]]
             rows = 6 * n + smap.scan.shape[0]
             Yg = Y[js]
             out = Yg @ smap.stacked.T
-            e_damp += float(np.einsum("ij,ij->", Yg, out[:, rows:rows + size]))
-            e_in += float(np.einsum("ij,ij->", Yg, out[:, rows + size:]))
             bound = np.abs(out[:, rows - 4 * n:rows]) @ smap.change.T
             slopes = np.abs(Yg[:, 2 * n + 1])
             if slopes.any():
                 bound += slopes[:, None] * smap.ramp_change
+            if inelastic:
+                # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
+                margin = np.where(elastic, self.dy - np.abs(out[:, 3 * n:4 * n] - state.slip) - bound[:, n:2 * n],
+                                  state.mode * out[:, 5 * n:6 * n] - bound[:, 3 * n:])
+                if not margin.min() > 0.0:
+                    return None
+            e_damp += float(np.einsum("ij,ij->", Yg, out[:, rows:rows + size]))
+            e_in += float(np.einsum("ij,ij->", Yg, out[:, rows + size:]))
             watched = np.abs(out[:, 2 * n:5 * n] + np.concatenate([np.zeros(2 * n), accel_offset]))
             # against the peaks at the step start: a superset of what later intervals need
             need = (watched + bound[:, :3 * n] > peaks).any(axis=1)
             flagged.extend((js[i], out[i, 6 * n:rows]) for i in np.flatnonzero(need))
+        cost.segments = count
         cost.cleared = count - len(flagged)
         xtol = EVENT_XTOL * float(times[-1] - times[0])
         for j, scan_vector in sorted(flagged, key=lambda item: item[0]):
             L = maps[j].length
             y = Y[j].copy()
             scan = Scan(cfg, scan_vector, float(y[2 * n + 1]), L)
-            self._peaks(cfg, scan, None, state, y, force, L, xtol, cost)
+            self._peaks(cfg, scan, None, state, y, p, L, xtol, cost)
         state.E_damping += e_damp
         state.E_input += e_in
         u1 = z[:n].copy()
         state.E_external += float(force @ (u1 - state.u))
+        if yielding:
+            self._yield_along(state, u1)
         state.u = u1
         state.v = z[n:].copy()
         return cost
@@ -362,14 +394,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         inelastic = self.hysteresis.inelastic
         while length - s > xtol:
             rem = length - s
-            cfg = self.configuration(state.mode)
+            _, cfg, elastic, yielding = self._mode_facts(state.mode)
             p = self._net_force(state, force)
-            y = np.empty(3 * n + 2)
-            y[:n] = state.u
-            y[n:2 * n] = state.v
-            y[2 * n] = ag0 + ag1 * s
-            y[2 * n + 1] = ag1
-            y[2 * n + 2:] = p
+            y = np.concatenate((state.u, state.v, (ag0 + ag1 * s, ag1), p))
             w = y[2 * n:]
             z0 = y[:2 * n]
             segment = None
@@ -404,18 +431,20 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # strict (no tolerance): a segment cleared here records no end value
                 peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
                 if inelastic:
+                    # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
                     e0 = watched[n:2 * n] - state.slip
                     reach = bound[n:2 * n]
-                    elastic = state.mode == 0
-                    up_flags = elastic & (e0 + reach >= self.dy)
-                    down_flags = elastic & (e0 - reach <= -self.dy)
-                    unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
-                    quiet = not (up_flags.any() or down_flags.any() or unload_flags.any())
+                    margin = np.where(elastic, self.dy - np.abs(e0) - reach, state.mode * watched[3 * n:] - bound[3 * n:])
+                    quiet = bool(margin.min() > 0.0)
+                    if not quiet:
+                        up_flags = elastic & (e0 + reach >= self.dy)
+                        down_flags = elastic & (e0 - reach <= -self.dy)
+                        unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
                 else:
                     quiet = True
                 if quiet and not peak_flags.any():
                     cost.cleared += 1
-                    self._commit(state, z1, force, e_damp, e_in)
+                    self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
@@ -434,7 +463,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     segment = segment or ModalSegment(cfg, z0, w)
                     e_damp, e_in = cfg.energies(segment.q0, segment.beta0, segment.beta1, w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
-                self._commit(state, z1, force, e_damp, e_in)
+                self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
             if event is not None:
                 self._switch(state, event[1], event[2])
@@ -444,23 +473,29 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     break
         return events
 
-    def _commit(self, state, z1, force, e_damp, e_in):
+    def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
+        """End a segment at ``z1`` (a fresh array: the state keeps views of it).  ``yielding``
+        False: no storey yields in this segment (its hysteretic state stays)."""
         n = self.n
-        u1 = z1[:n].copy()
+        u1 = z1[:n]
         state.E_external += float(force @ (u1 - state.u))
         state.E_damping += e_damp
         state.E_input += e_in
-        if self.hysteresis.inelastic:
-            yielding = state.mode != 0
-            if yielding.any():
-                d0 = _drift(state.u)
-                d1 = _drift(u1)
-                # a yielding storey dissipates (1 - alpha) Fy per unit of slip; its drift is
-                # monotonic in the direction of mode over the segment (unloading is an event)
-                state.E_hysteretic += float(np.sum(((1.0 - self.alpha) * self.fy * state.mode * (d1 - d0))[yielding]))
-                state.slip = np.where(yielding, d1 - state.mode * self.dy, state.slip)
+        if yielding and self.hysteresis.inelastic:
+            self._yield_along(state, u1)
         state.u = u1
-        state.v = z1[n:].copy()
+        state.v = z1[n:]
+
+    def _yield_along(self, state, u1):
+        """The yielding storeys from ``state.u`` to ``u1``: a yielding storey dissipates
+        ``(1 - alpha) Fy`` per unit of slip; its drift is monotonic in the direction of mode over
+        the segment (unloading is an event), its slip follows the drift."""
+        yielding = state.mode != 0
+        if yielding.any():
+            d0 = _drift(state.u)
+            d1 = _drift(u1)
+            state.E_hysteretic += float(np.sum(((1.0 - self.alpha) * self.fy * state.mode * (d1 - d0))[yielding]))
+            state.slip = np.where(yielding, d1 - state.mode * self.dy, state.slip)
 
     def _switch(self, state, storey: int, kind: int):
         """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
@@ -472,6 +507,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         mode[storey] = kind
         state.mode = mode
         state.slip = slip
+        state.offset = None
 
     # -- events -------------------------------------------------------------------------------
     def _first_event(self, cfg, scan, state, y, rem, xtol, cost, up_flags=None, down_flags=None,

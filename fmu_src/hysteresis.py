@@ -110,43 +110,49 @@ class StoreyHysteresis:
 
         Messages name the FMU/scene parameter, its value and the allowed range.
         """
+        return [message for _, message in self.parameter_problems(stiffnesses, damping_ratio, initial_drifts)]
+
+    def parameter_problems(self, stiffnesses, damping_ratio: float = 0.05, initial_drifts=None) -> list[tuple[str, str]]:
+        """:meth:`problems` as ``(parameter, message)`` pairs: the FMU parameter each is about
+        (``"Fy[2]"``, ``"alpha"``, ``"x0[1]"``, ...; ``"bw_beta bw_gamma"`` for a rule on both),
+        so that a scene can name its line."""
         out = []
         if self.model not in HYSTERESIS_MODELS:
-            return [f"hysteresis = {self.model!r} is not allowed: one of "
-                    + ", ".join(repr(m) for m in HYSTERESIS_MODELS)]
+            return [("hysteresis", f"hysteresis = {self.model!r} is not allowed: one of "
+                     + ", ".join(repr(m) for m in HYSTERESIS_MODELS))]
         if not (math.isfinite(self.alpha) and 0.0 <= self.alpha < 1.0):
-            out.append(f"alpha = {self.alpha!r} is outside the allowed range 0 <= alpha < 1")
+            out.append(("alpha", f"alpha = {self.alpha!r} is outside the allowed range 0 <= alpha < 1"))
         if not self.inelastic:
             return out
         k = np.asarray(stiffnesses, dtype=float)
         n = k.size
         fy = self.yield_shear
         if fy.size != n:
-            out.append(f"Fy has {fy.size} value(s) for {n} storeys: give one yield shear per storey")
+            out.append(("Fy", f"Fy has {fy.size} value(s) for {n} storeys: give one yield shear per storey"))
             return out
         for i, value in enumerate(fy, start=1):
             if not (math.isfinite(value) and value > 0.0):
-                out.append(f"Fy[{i}] = {float(value)!r} N is outside the allowed range 0 < Fy[{i}] "
-                           f"(hysteresis = {self.model!r} needs a yield shear for every storey)")
+                out.append((f"Fy[{i}]", f"Fy[{i}] = {float(value)!r} N is outside the allowed range 0 < Fy[{i}] "
+                                        f"(hysteresis = {self.model!r} needs a yield shear for every storey)"))
         if n == 1 and k[0] == 0.0:
-            out.append(f"hysteresis = {self.model!r} needs a storey stiffness: a free mass (k[1] = 0) "
-                       f"has no storey to yield; use hysteresis = 'linear'")
+            out.append(("k[1]", f"hysteresis = {self.model!r} needs a storey stiffness: a free mass (k[1] = 0) "
+                                f"has no storey to yield; use hysteresis = 'linear'"))
         if damping_ratio == 0.0 and self.alpha == 0.0:
-            out.append(f"alpha = 0 with zeta = 0: a yielded storey without hardening and without damping "
-                       f"is an undamped mechanism, whose state matrix is defective; give alpha > 0 or zeta > 0")
+            out.append(("alpha", "alpha = 0 with zeta = 0: a yielded storey without hardening and without damping "
+                                 "is an undamped mechanism, whose state matrix is defective; give alpha > 0 or zeta > 0"))
         if self.model == "bouc_wen":
             b, g, nn = self.bw_beta, self.bw_gamma, self.bw_n
             if not (math.isfinite(nn) and 1.0 <= nn <= BOUC_WEN_MAX_N):
-                out.append(f"bw_n = {nn!r} is outside the allowed range 1 <= bw_n <= {BOUC_WEN_MAX_N:g}")
+                out.append(("bw_n", f"bw_n = {nn!r} is outside the allowed range 1 <= bw_n <= {BOUC_WEN_MAX_N:g}"))
             if not (math.isfinite(b) and math.isfinite(g)):
-                out.append(f"bw_beta = {b!r}, bw_gamma = {g!r}: must be finite")
+                out.append(("bw_beta bw_gamma", f"bw_beta = {b!r}, bw_gamma = {g!r}: must be finite"))
             else:
                 if not b + g > 0.0:
-                    out.append(f"bw_beta + bw_gamma = {b + g:.6g} is outside the allowed range bw_beta + bw_gamma > 0 "
-                               f"(unbounded hysteretic force otherwise)")
+                    out.append(("bw_beta bw_gamma", f"bw_beta + bw_gamma = {b + g:.6g} is outside the allowed range "
+                                           f"bw_beta + bw_gamma > 0 (unbounded hysteretic force otherwise)"))
                 if not b - g >= 0.0:
-                    out.append(f"bw_beta - bw_gamma = {b - g:.6g} is outside the allowed range bw_beta - bw_gamma >= 0 "
-                               f"(negative dissipation on some loading paths otherwise)")
+                    out.append(("bw_beta bw_gamma", f"bw_beta - bw_gamma = {b - g:.6g} is outside the allowed range "
+                                           f"bw_beta - bw_gamma >= 0 (negative dissipation on some loading paths otherwise)"))
         if out or initial_drifts is None:
             return out
         dy = self.yield_drift(k)
@@ -155,8 +161,8 @@ class StoreyHysteresis:
         for i in range(n):
             inside = abs(d0[i]) <= limit[i] if self.model == "bilinear" else abs(d0[i]) < limit[i]
             if not inside:
-                out.append(f"the initial drift of storey {i + 1} (x0) is {float(d0[i])!r} m, beyond its yield drift "
-                           f"Fy[{i + 1}] / k[{i + 1}] = {dy[i]:.6g} m: the initial state must be elastic")
+                out.append((f"x0[{i + 1}]", f"the initial drift of storey {i + 1} (x0) is {float(d0[i])!r} m, beyond its "
+                                            f"yield drift Fy[{i + 1}] / k[{i + 1}] = {dy[i]:.6g} m: the initial state must be elastic"))
         return out
 
     def check(self, stiffnesses, damping_ratio: float = 0.05, initial_drifts=None) -> None:

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from cosim.apps.accuracy import REDUCED_FAMILIES, Row, markdown, run_study, score, write_study
+from cosim.apps.accuracy import CRITERIA, REDUCED_FAMILIES, Row, markdown, run_study, score, write_study
 from cosim.master.system import Catalog
 
 
@@ -88,3 +88,58 @@ def test_written_files(study, tmp_path):
     text = markdown(study)
     assert "| adaptive | contact_fraction = 1/64 |" in text
     assert (folder / "accuracy.png").stat().st_size > 10_000
+
+
+@pytest.fixture(scope="module")
+def inelastic_study(fmu_dir):
+    """default_inelastic's first 4.2 s (three impacts, storeys yielding): the default settings
+    and OpenSees (Steel01 storeys) at 1 ms."""
+    from cosim.apps.accuracy import FAMILIES
+    from cosim.peers.opensees import opensees_available
+
+    default = [f for f in FAMILIES if f.name == "adaptive-resolved"]
+    with Catalog(fmu_dir) as catalog:
+        return run_study("default_inelastic", catalog=catalog, families=default,
+                         opensees_dts=(1e-3,) if opensees_available() else (), stop_time=4.2,
+                         reference_rtol=1e-10, log=None)
+
+
+def test_inelastic_scene_is_scored_on_its_drifts(inelastic_study):
+    study = inelastic_study
+    assert study.reference["yielding"] == [0, 1] and study.reference["impacts"] == 3
+    assert max(max(mu) for mu in study.reference["ductility"]) > 1.5
+    default = next(r for r in study.rows if r.method == "adaptive-resolved" and r.value == 0.5)
+    assert default.status == "ok" and default.meets_criteria
+    assert math.isfinite(default.err_peak_drift) and default.err_peak_drift < CRITERIA["peak_drift"]
+    assert default.err_residual_drift < CRITERIA["residual_drift"]
+    text = markdown(study)
+    assert "peak drift err % | residual drift err %" in text and "Yielding storeys: peak ductility" in text
+
+
+def test_inelastic_scene_against_opensees(inelastic_study):
+    from cosim.peers.opensees import opensees_available
+
+    if not opensees_available():
+        pytest.skip("openseespy is not importable")
+    study = inelastic_study
+    peer = next(r for r in study.rows if r.method == "opensees")
+    assert peer.status.startswith("ok") and math.isfinite(peer.err_peak_drift)
+    agreement = study.peer_agreement()
+    # the package's default settings and OpenSees (Steel01, Newmark at 1 ms) on the same model
+    assert agreement["dt"] == 1e-3
+    assert agreement["peak_displacement"] < 0.01 and agreement["ductility"] < 0.01
+    assert "Default settings against OpenSees at its finest tested step" in markdown(study)
+
+
+def test_drift_criteria_apply_to_yielding_scenes_only():
+    ref = dict(peak_force_N=100.0, impacts=1, dissipated_energy_J=10.0, peak_displacements_m=[1.0],
+               impact_times_s=[1.0], yielding=[0], peak_drifts_m=[[0.02, 0.01]], residual_drifts_m=[[0.004, -0.002]])
+    good = score(Row("x", "step", 1.0), ref, 100.0, 1, 10.0, [1.0], [1.0], [[0.0201, 0.01]], [[0.00403, -0.002]])
+    assert good.meets_criteria
+    assert good.err_peak_drift == pytest.approx(0.005) and good.err_residual_drift == pytest.approx(0.0075)
+    assert not score(Row("x", "step", 1.0), ref, 100.0, 1, 10.0, [1.0], [1.0], [[0.0203, 0.01]],
+                     [[0.004, -0.002]]).meets_criteria
+    assert not score(Row("x", "step", 1.0), ref, 100.0, 1, 10.0, [1.0], [1.0], [[0.02, 0.01]],
+                     [[0.004, -0.00205]]).meets_criteria
+    linear = dict(ref, yielding=[])
+    assert math.isnan(score(Row("x", "step", 1.0), linear, 100.0, 1, 10.0, [1.0], [1.0]).err_peak_drift)

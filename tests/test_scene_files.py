@@ -10,7 +10,7 @@ from cosim.master.loader import bundled_scenes, load_scene
 from cosim.master.scene import SceneError
 
 REQUIRED = {"default", "elcentro", "kobe", "sanfernando", "parkfield", "single_impact",
-            "free_vibration", "one_building", "kasai_maison"}
+            "free_vibration", "one_building", "kasai_maison", "default_inelastic", "kasai_maison_inelastic"}
 
 
 BASE = """
@@ -54,7 +54,7 @@ def test_bundled_scene_validates_against_the_fmus(name, catalog):
     kinds = [s.fmu for s in scene.instances()]
     # only what the scene calls for
     assert kinds.count("ground_motion") == (0 if name in ("single_impact", "free_vibration") else 1)
-    assert kinds.count("pounding") == {"one_building": 0, "kasai_maison": 8}.get(name, 1)
+    assert kinds.count("pounding") == {"one_building": 0, "kasai_maison": 8, "kasai_maison_inelastic": 8}.get(name, 1)
     assert kinds.count("building") == (1 if name == "one_building" else 2)
 
 
@@ -139,6 +139,23 @@ def test_override_of_an_instance_the_scene_does_not_have(catalog):
     (("name = \"t\"", "name = \"a b\""), r"must be a word"),
     (("step = 0.01", "step = 0.01\ncoupling = \"newton\""), r"coupling = 'newton' is not one of"),
     (("[ground]", "[ground\n"), r"invalid TOML"),
+    # the storey law's own rules (issue 18's bad input), at the line of the parameter
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bilinear"\nFy = [1e5, 0.0]'),
+     r"line 11: buildings.left.Fy\[2\] = 0.0 N is outside the allowed range 0 < Fy\[2\]"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bilinear"\nFy = [1e5, -2e5]'),
+     r"line 11: buildings.left.Fy\[2\] = -200000.0 N is outside the allowed range 0 < Fy\[2\]"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bilinear"\nFy = 1e5\nalpha = 1.0'),
+     r"line 12: buildings.left.alpha = 1.0 is outside the allowed range 0 <= alpha < 1"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bouc_wen"\nFy = 1e5\nbw_gamma = 0.9'),
+     r"line 12: buildings.left.bw_beta - bw_gamma = -0.4 is outside the allowed range"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bouc_wen"\nFy = 1e5\nbw_beta = -0.6\nbw_gamma = -0.6'),
+     r"line 12: buildings.left.bw_beta \+ bw_gamma = -1.2 is outside the allowed range bw_beta \+ bw_gamma > 0"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "elastoplastic"'),
+     r"line 10: buildings.left.hysteresis = 'elastoplastic' is not allowed: one of 'linear'"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bilinear"\nFy = 1e5\nx0 = [0.01, 0.01]'),
+     r"line 12: buildings.left: the initial drift of storey 1 \(x0\) is 0.01 m, beyond its yield drift"),
+    (("k = [4.0e7, 3.0e7]", 'k = [4.0e7, 3.0e7]\nhysteresis = "bilinear"\nFy = 1e5\nzeta = 0.0\nalpha = 0.0'),
+     r"buildings.left.alpha = 0 with zeta = 0: a yielded storey without hardening"),
 ])
 def test_bad_scene_is_a_one_line_error(tmp_path, catalog, edit, match):
     old, new = edit

@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # Columns that are pure functions of the simulation (wall times and worker names are not).
 PHYSICS = ("peak_force_N", "impacts", "dissipated_energy_J", "max_penetration_m", "peak_impact_velocity_m_s",
            "first_impact_s", "left.peak_displacement_m", "left.peak_drift_m", "left.peak_base_shear_N",
-           "right.peak_displacement_m", "right.peak_drift_m", "right.peak_base_shear_N", "energy_input_J",
+           "right.peak_displacement_m", "right.peak_drift_m", "right.peak_base_shear_N",
+           "left.hysteretic_energy_J", "right.residual_drift_m", "energy_input_J",
            "energy_residual_relative", "communication_steps")
 
 
@@ -40,7 +41,7 @@ def client():
     from distributed import Client, LocalCluster
 
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=40)
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=40)
     c = Client(cluster)
     yield c
     c.close()

@@ -16,9 +16,13 @@ import math
 import re
 import tomllib
 from pathlib import Path
+
+import numpy as np
 from typing import Any, Mapping, Sequence
 
 from fmu_src.ground_records import BUNDLED, SCALING_TARGETS, scaling_conflict
+from fmu_src.hysteresis import StoreyHysteresis
+from fmu_src.shear_building import ShearBuilding
 
 from ..fmus import BUILDING, GROUND, POUNDING
 from .coupling import COUPLINGS
@@ -392,6 +396,7 @@ class _Builder:
         for key in list(flat):
             flat[key] = self._check_value(BUILDING, where, key, flat[key])
             self._check_storey(where, key, flat[key], n)
+        self._check_storey_law(where, flat, n)
         return flat
 
     def _storeys(self, where: str, table: Mapping[str, Any]) -> int:
@@ -413,6 +418,37 @@ class _Builder:
                 raise self.error(f"{where}.{key} = {value!r} kg: a mass must be > 0", key, where)
             if base == "k" and value < 0:
                 raise self.error(f"{where}.{key} = {value!r} N/m: a storey stiffness must be >= 0", key, where)
+
+    def _check_storey_law(self, where: str, flat: Mapping[str, Any], n: int) -> None:
+        """The storey law's own rules (``StoreyHysteresis.parameter_problems``, what building.fmu
+        refuses at initialisation: yield shears of yielding storeys, alpha, Bouc-Wen parameters,
+        an initial drift beyond yield), named at the line of the parameter they are about."""
+        defaults = parameter_defaults(BUILDING)
+
+        def value(key):
+            return flat.get(key, defaults[key])
+
+        floors = range(1, n + 1)
+        law = StoreyHysteresis(str(value("hysteresis")), [float(value(element_name("Fy", i))) for i in floors],
+                               float(value("alpha")), float(value("bw_n")), float(value("bw_beta")),
+                               float(value("bw_gamma")))
+        try:   # the stiffnesses the FMU will use (scaled to T1); other problems are reported elsewhere
+            masses = [float(value(element_name("m", i))) for i in floors]
+            k = [float(value(element_name("k", i))) for i in floors]
+            T1, zeta, damping = float(value("T1")), float(value("zeta")), str(value("damping"))
+            building = (ShearBuilding.from_period(T1, masses, k, zeta, damping) if T1 > 0.0
+                        else ShearBuilding(masses, k, zeta, damping))
+        except ValueError:
+            return
+        x0 = np.array([float(value(element_name("x0", i))) for i in floors])
+        drifts = np.diff(x0, prepend=0.0)
+        for keys, message in law.parameter_problems(building.stiffnesses, building.damping_ratio, drifts):
+            # a rule on several parameters: name the one the scene (or a --set) gave
+            names = keys.split()
+            key = next((k for k in names if (where, k) in self.overridden or self._line_of(k, where)), names[0])
+            text = (f"{where}.{message}" if any(message.startswith(base_name(k)) for k in names)
+                    else f"{where}: {message}")
+            raise self.error(text, key, where)
 
     def _floors(self, floors: Any, left: InstanceSpec, right: InstanceSpec) -> list[tuple[int, int]]:
         nl, nr = int(left.parameters["n_storeys"]), int(right.parameters["n_storeys"])

@@ -36,6 +36,10 @@ def format_summary(summary: Summary) -> str:
         lines.append(f"  {'':<10} drift ratio {100 * b.peak_drift_ratio:.3g} % (storey "
                      f"{b.peak_drift_ratio_storey}), floor acceleration {b.peak_acceleration_m_s2 / G:.3g} g "
                      f"(floor {b.peak_acceleration_floor}){'' if b.peaks_in_step else ', at communication points'}")
+        if b.yields:
+            lines.append(f"  {'':<10} {b.hysteresis} storeys: peak ductility {b.peak_ductility:.3g} (storey "
+                         f"{b.peak_ductility_storey}), residual drift {b.residual_drift_m:.3g} m (storey "
+                         f"{b.residual_drift_storey}), hysteretic energy {b.hysteretic_energy_J:.4g} J")
     if s.contacts:
         grazes = f" (and {s.grazes} graze{'s' if s.grazes != 1 else ''}: contacts shallower than graze_depth)" \
             if s.grazes else ""
@@ -43,8 +47,9 @@ def format_summary(summary: Summary) -> str:
                      f"dissipated {s.dissipated_energy_J:.4g} J")
     else:
         lines.append("  no contact element")
+    hysteretic = f"; hysteretic {s.energy_hysteretic_J:.4g} J" if any(b.yields for b in s.buildings.values()) else ""
     lines.append(f"  energy: input {s.energy_initial_J + 0:.4g} J initial + "
-                 f"{s.energy_input_J - s.energy_initial_J:.4g} J ground; residual "
+                 f"{s.energy_input_J - s.energy_initial_J:.4g} J ground{hysteretic}; residual "
                  f"{s.energy_residual_J:.3g} J ({100 * s.energy_residual_relative:.3g} %)")
     lines += [f"  warning: {w}" for w in s.warnings]
     return "\n".join(lines)
@@ -142,7 +147,14 @@ def plot_all(result: SimulationResult, folder: Path) -> list[Path]:
     if result.scene.contacts:
         out += [plot_contact_force(result, folder / "contact_force.png", plt),
                 plot_hysteresis(result, folder / "hysteresis.png", plt)]
+    if yielding_buildings(result):
+        out.append(plot_storey_loops(result, folder / "storey_loops.png", plt))
     return out
+
+
+def yielding_buildings(result: SimulationResult) -> list[str]:
+    """The buildings of a run whose storeys yield (``hysteresis`` other than linear)."""
+    return [b.name for b in result.scene.buildings if str(b.value("hysteresis")) != "linear"]
 
 
 
@@ -236,12 +248,42 @@ def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
     return path
 
 
+def plot_storey_loops(result: SimulationResult, path: Path, plt, storeys: int = 3) -> Path:
+    """Storey shear against storey drift of every yielding building, at the communication
+    points: one panel per building, its ``storeys`` lowest storeys (where yielding concentrates
+    in a shear building) with the yield shears ``+-Fy`` marked."""
+    names = yielding_buildings(result)
+    fig, axes = plt.subplots(1, len(names), figsize=(6 * len(names), 5), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        spec = result.scene.instance(name)
+        n = result.scene.n_storeys(name)
+        for i in range(1, min(n, storeys) + 1):
+            d = result[column(name, element_name("drift", i))]
+            V = result[column(name, element_name("V", i))]
+            line, = ax.plot(d * 1e3, V / 1e6, lw=0.7, label=f"storey {i}")
+            fy = float(spec.value(element_name("Fy", i)))
+            ax.axhline(fy / 1e6, color=line.get_color(), ls=":", lw=0.8)
+            ax.axhline(-fy / 1e6, color=line.get_color(), ls=":", lw=0.8)
+        ax.set_xlabel("storey drift [mm]")
+        ax.set_ylabel("storey shear [MN]")
+        ax.set_title(f"{result.scene.name}: {name} ({spec.value('hysteresis')} storeys); dotted: +-Fy")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def plot_energy(result: SimulationResult, path: Path, plt) -> Path:
     e = energy_history(result)
     t = e["time"]
     fig, ax = plt.subplots(figsize=(10, 4.5))
     parts = [e["kinetic"], e["strain"], e["damping"], e["contact"]]
     labels = ["kinetic", "strain", "structural damping", "contact dissipation"]
+    if np.any(e["hysteretic"]):
+        parts.append(e["hysteretic"])
+        labels.append("hysteretic (yielding storeys)")
     ax.stackplot(t, *[p / 1e3 for p in parts], labels=labels, alpha=0.75)
     ax.plot(t, e["input"] / 1e3, "k-", lw=1.2, label="input (initial + ground)")
     ax.plot(t, e["residual"] / 1e3, "r--", lw=1.0, label="residual")

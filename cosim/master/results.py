@@ -11,11 +11,13 @@ calibration read these fields; none re-derives them.  Writing them to files is
 Energy balance (J), from the outputs of the FMUs alone::
 
     E_initial + sum_buildings E_input(t)
-        = sum_buildings (E_kinetic + E_strain + E_damping)(t)
+        = sum_buildings (E_kinetic + E_strain + E_damping + E_hysteretic)(t)
           + sum_contacts E_dissipated(t) + residual(t)
 
 ``E_initial`` is the mechanical energy the buildings start with (x0, v0),
-``E_input`` the work of the ground motion on the relative motion.  In a
+``E_input`` the work of the ground motion on the relative motion, ``E_strain`` the elastic
+(stored) part of the storeys' energy and ``E_hysteretic`` what yielding storeys dissipated
+(0 for linear storeys).  In a
 monolithic solution the residual is the elastic energy stored in contacts
 that are closed at t (zero once they open); in co-simulation it also holds
 the coupling error: the work the buildings receive from the mean contact
@@ -134,6 +136,15 @@ class BuildingSummary:
     else taken at the communication points.  A floor that pounds also gets the contact's
     contact force inside the steps (:func:`cosim.master.impacts.contact_floor_accelerations`):
     the building's own peak sees only the force it held over each step.
+
+    Inelastic demand of its storeys (``building.fmu``'s outputs at the end of the run):
+
+    * ``hysteresis``: the storey law (``linear``, ``bilinear``, ``bouc_wen``);
+    * ``peak_ductility``: the largest ``mu[i]``, peak drift (located inside the steps) over the
+      yield drift ``Fy[i] / k[i]``, and its storey; None when the building has no yield shear;
+    * ``residual_drift_m``: the storey drift's plastic part ``drift_residual[i]`` at the end of
+      largest magnitude (signed, m), and its storey; 0 for linear storeys;
+    * ``hysteretic_energy_J``: energy dissipated by yielding (``E_hysteretic``).
     """
 
     n_storeys: int
@@ -152,6 +163,17 @@ class BuildingSummary:
     peak_drifts_m: tuple[float, ...] = ()
     peak_drift_ratios: tuple[float, ...] = ()
     peak_accelerations_m_s2: tuple[float, ...] = ()
+    hysteresis: str = "linear"
+    peak_ductility: float | None = None
+    peak_ductility_storey: int | None = None
+    residual_drift_m: float = 0.0
+    residual_drift_storey: int | None = None
+    hysteretic_energy_J: float = 0.0
+
+    @property
+    def yields(self) -> bool:
+        """True for a building with yielding storeys (bilinear or Bouc-Wen)."""
+        return self.hysteresis != "linear"
 
     def to_dict(self) -> dict[str, Any]:
         return dict(n_storeys=self.n_storeys, peak_displacement_m=self.peak_displacement_m,
@@ -163,7 +185,10 @@ class BuildingSummary:
                     peak_acceleration_floor=self.peak_acceleration_floor, peaks_in_step=self.peaks_in_step,
                     peak_displacements_m=list(self.peak_displacements_m), peak_drifts_m=list(self.peak_drifts_m),
                     peak_drift_ratios=list(self.peak_drift_ratios),
-                    peak_accelerations_m_s2=list(self.peak_accelerations_m_s2))
+                    peak_accelerations_m_s2=list(self.peak_accelerations_m_s2),
+                    hysteresis=self.hysteresis, peak_ductility=self.peak_ductility,
+                    peak_ductility_storey=self.peak_ductility_storey, residual_drift_m=self.residual_drift_m,
+                    residual_drift_storey=self.residual_drift_storey, hysteretic_energy_J=self.hysteretic_energy_J)
 
 
 @dataclass(frozen=True)
@@ -192,6 +217,7 @@ class Summary:
     energy_residual_relative: float
     cost: Cost
     warnings: list[str] = field(default_factory=list)
+    energy_hysteretic_J: float = 0.0
     #: what ran, from the effective parameters (:func:`system_description`)
     system: str = ""
     #: the overrides applied to the scene file (their text)
@@ -234,7 +260,7 @@ class Summary:
             energy_initial_J=self.energy_initial_J, energy_input_J=self.energy_input_J,
             energy_kinetic_J=self.energy_kinetic_J, energy_strain_J=self.energy_strain_J,
             energy_damping_J=self.energy_damping_J, energy_contact_J=self.energy_contact_J,
-            energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
+            energy_hysteretic_J=self.energy_hysteretic_J, energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
         out.update(self.cost.to_dict())
         out["warnings"] = list(self.warnings)
         out["scene_as_run"] = self.scene_as_run
@@ -364,8 +390,8 @@ def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
     initial = kinetic[0] + strain[0]
     terms = dict(time=result.time, input=initial + total(buildings, "E_input"), kinetic=kinetic, strain=strain,
                  damping=total(buildings, "E_damping"), contact=total(contacts, "E_dissipated"),
-                 external=total(buildings, "E_external"))
-    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"])
+                 external=total(buildings, "E_external"), hysteretic=total(buildings, "E_hysteretic"))
+    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"] + terms["hysteretic"])
     return terms
 
 
@@ -405,6 +431,14 @@ def _peaks(result: SimulationResult, name: str, variable: str, n: int) -> tuple[
     return np.max(_floor_history(result, name, variable, n), axis=0), False
 
 
+def _final_row(result: SimulationResult, name: str, variable: str, n: int) -> np.ndarray | None:
+    """``variable[1..n]`` of instance ``name`` at the end of the run (None if not recorded)."""
+    columns = [column(name, element_name(variable, i)) for i in range(1, n + 1)]
+    if not all(result.has(c) for c in columns):
+        return None
+    return np.array([result[c][-1] for c in columns])
+
+
 def _building_summary(result: SimulationResult, name: str, n: int,
                       spikes: Mapping[int, float] | None = None) -> BuildingSummary:
     spec = result.scene.instance(name)
@@ -424,6 +458,19 @@ def _building_summary(result: SimulationResult, name: str, n: int,
     fx, fd, fr, fa = (int(np.argmax(v)) for v in (x, d, ratio, a))
     # when: the sample closest to the peak of that floor (the in-step peak lies in an adjacent step)
     kx = int(np.argmax(x_samples[:, fx]))
+    hysteresis = str(spec.value("hysteresis"))
+    # the FMU's in-step peaks and end values (mu = 0 where a storey has no yield shear)
+    mu = _final_row(result, name, "mu", n)
+    yield_shear = any(float(spec.value(element_name("Fy", i))) > 0.0 for i in range(1, n + 1))
+    peak_mu = storey_mu = None
+    if mu is not None and yield_shear:
+        storey_mu = int(np.argmax(mu)) + 1
+        peak_mu = float(mu[storey_mu - 1])
+    residual = _final_row(result, name, "drift_residual", n)
+    residual_m, residual_storey = 0.0, None
+    if residual is not None and hysteresis != "linear":
+        residual_storey = int(np.argmax(np.abs(residual))) + 1
+        residual_m = float(residual[residual_storey - 1])
     return BuildingSummary(
         n_storeys=n, peak_displacement_m=float(x[fx]), peak_displacement_floor=fx + 1,
         peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[fd]), peak_drift_storey=fd + 1,
@@ -431,7 +478,9 @@ def _building_summary(result: SimulationResult, name: str, n: int,
         peak_drift_ratio=float(ratio[fr]), peak_drift_ratio_storey=fr + 1, peak_acceleration_m_s2=float(a[fa]),
         peak_acceleration_floor=fa + 1, peaks_in_step=in_step, peak_displacements_m=tuple(map(float, x)),
         peak_drifts_m=tuple(map(float, d)), peak_drift_ratios=tuple(map(float, ratio)),
-        peak_accelerations_m_s2=tuple(map(float, a)))
+        peak_accelerations_m_s2=tuple(map(float, a)), hysteresis=hysteresis, peak_ductility=peak_mu,
+        peak_ductility_storey=storey_mu, residual_drift_m=residual_m, residual_drift_storey=residual_storey,
+        hysteretic_energy_J=_final(result, column(name, "E_hysteretic")))
 
 
 #: |energy residual| / input energy above which a run ends with a warning (issue 15: 1 %); the
@@ -471,7 +520,8 @@ def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = N
         cost=result.cost, warnings=sampling_warnings(contacts) + accuracy_warnings(
             residual, energy_in, result.strategy, scene.step, energy_limit, creation_limit),
         system=system_description(scene, _final(result, column(scene.ground.name, "pga")) if scene.ground else None),
-        overrides=list(scene.overrides), scene_as_run=scene.as_run(), provenance=dict(provenance or {}))
+        overrides=list(scene.overrides), scene_as_run=scene.as_run(), provenance=dict(provenance or {}),
+        energy_hysteretic_J=float(e["hysteretic"][-1]))
 
 
 def system_description(scene: "Scene", pga: float | None = None) -> str:

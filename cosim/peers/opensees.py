@@ -12,6 +12,23 @@ model:
   ``eta = a0 m_i`` for the mass-proportional part: ``C = a0 M + a1 K`` as in
   :class:`~fmu_src.shear_building.ShearBuilding`, and no Rayleigh damping on the contact
   (``zeroLength`` elements take none unless ``-doRayleigh`` is given);
+* yielding storeys (:class:`fmu_src.hysteresis.StoreyHysteresis`) in the same ``zeroLength``
+  springs, with the stiffness-proportional dashpot ``a1 k_i`` (Rayleigh on the *initial*
+  stiffness, as ``building.fmu``) moved to a parallel ``zeroLength`` element of an ``Elastic``
+  material with ``E = 0``:
+
+  - ``bilinear``: ``Steel01(Fy, E0 = k, b = alpha, a1 = 0, a2 = 1, a3 = 0, a4 = 1)``.  Its stress
+    is ``max(b E0 eps - (1 - b) Fy, min(b E0 eps + (1 - b) Fy, sigma_n + E0 d eps))``
+    (``Steel01::determineTrialState``): kinematic hardening, our law exactly; ``a1 = a3 = 0``
+    switch its isotropic hardening off (``a2 = a4 = 1`` only keep its formula finite);
+  - ``bouc_wen``: ``BoucWen(alpha, ko = k, n, gamma / dy^n, beta / dy^n, Ao = 1, 0, 0, 0, tol,
+    maxIter)`` (Haukaas, ``BoucWenMaterial.cpp``): stress ``alpha ko eps + (1 - alpha) ko z``
+    with a *displacement-valued* ``z`` and ``dz/deps = Ao - |z|^n (gamma + beta sgn(deps z))``.
+    With ``z = dy zeta`` this is our dimensionless law (``(1 - alpha) k dy zeta = (1 - alpha)
+    Fy zeta``) when its ``gamma`` and ``beta`` are ours divided by ``dy^n``; ``deltaA =
+    deltaNu = deltaEta = 0`` (no degradation).  The material integrates ``z`` by backward
+    Euler over each strain increment (a Newton iteration to ``tol`` in m), first order in
+    ``dt``;
 * the ground acceleration as a ``Path`` time series on the record's samples (OpenSees
   interpolates linearly between them, as :meth:`Record.at` does);
 * per contact a ``zeroLength`` element between the two floors with
@@ -137,6 +154,17 @@ class PeerResult:
     algorithms: dict = field(default_factory=dict)
     subdivided_steps: int = 0
     message: str = ""
+    #: per building (as :class:`cosim.peers.reference.ReferenceResult`): peak storey drifts
+    #: (m, sampled at the steps), ductility (peak drift / yield drift, 0 without a yield
+    #: shear), residual drifts ``d - V / k`` at the end (m, 0 for linear storeys) and the
+    #: hysteretic energy (J, trapezoid of ``V`` over ``d`` minus the elastic energy at the end;
+    #: NaN unless the storey shears were recorded, ``record_storeys``)
+    peak_drifts: tuple[np.ndarray, ...] = ()
+    ductility: tuple[np.ndarray, ...] = ()
+    residual_drifts: tuple[np.ndarray, ...] = ()
+    hysteretic_energy_J: tuple[float, ...] = ()
+    #: storey shears (N): every step with ``record_storeys``, else the last step only
+    storey_shear: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def displacements(self, building: int) -> np.ndarray:
         return self.u[:, self.floor_offsets[building]:self.floor_offsets[building + 1]]
@@ -167,9 +195,34 @@ def _storey_stiffnesses(building) -> np.ndarray:
     return np.append(K[0, 0] - (above[0] if n > 1 else 0.0), above) if n > 1 else np.array([K[0, 0]])
 
 
+#: absolute tolerance (m) of BoucWen's Newton iteration on its displacement-valued z, and its
+#: iteration limit: far below every drift of interest (dy ~ 1e-2 m), so that the material's
+#: own time discretisation is what the comparison measures
+BOUC_WEN_TOL = 1e-14
+BOUC_WEN_MAX_ITER = 50
+
+
+def storey_spec(hysteresis, k: float, fy: float) -> dict | None:
+    """The OpenSees material of one storey (module docstring): None for a linear storey, else
+    ``{"material": "Steel01" | "BoucWen", "args": [...]}`` (the arguments after the tag)."""
+    if hysteresis is None or not hysteresis.inelastic:
+        return None
+    alpha = float(hysteresis.alpha)
+    if hysteresis.model == "bilinear":
+        return dict(material="Steel01", args=[float(fy), float(k), alpha, 0.0, 1.0, 0.0, 1.0])
+    if hysteresis.model == "bouc_wen":
+        dy = fy / k
+        scale = dy ** hysteresis.bw_n
+        return dict(material="BoucWen", args=[alpha, float(k), float(hysteresis.bw_n), hysteresis.bw_gamma / scale,
+                                               hysteresis.bw_beta / scale, 1.0, 0.0, 0.0, 0.0, BOUC_WEN_TOL,
+                                               BOUC_WEN_MAX_ITER])
+    raise ValueError(f"OpenSees peer: hysteresis = {hysteresis.model!r} has no OpenSees material here")
+
+
 def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time: float, dt: float,
                       x0=None, v0=None, material: str = "JankowskiImpact", *, tol: float = 1e-12,
-                      max_iter: int = 25, max_subdivisions: int = 4) -> dict:
+                      max_iter: int = 25, max_subdivisions: int = 4, hystereses: Sequence | None = None,
+                      record_storeys: bool = False) -> dict:
     """The OpenSees model as plain numbers (what the child process receives)."""
     if material not in MATERIALS:
         raise ValueError(f"material = {material!r} is not allowed: one of {', '.join(MATERIALS)}")
@@ -177,18 +230,30 @@ def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time
     if not (math.isfinite(dt) and 0.0 < dt <= stop_time):
         raise ValueError(f"dt = {dt!r} s must be > 0 and <= stop_time = {stop_time!r} s")
     spec_buildings = []
+    hystereses = list(hystereses) if hystereses is not None else [None] * len(buildings)
+    if len(hystereses) != len(buildings):
+        raise ValueError(f"hystereses: {len(hystereses)} for {len(buildings)} buildings")
     for b, building in enumerate(buildings):
         a0, a1 = _rayleigh(building)
         n = len(building.masses)
+        hysteresis = hystereses[b]
+        k_storeys = _storey_stiffnesses(building)
+        storeys = None
+        if hysteresis is not None and hysteresis.inelastic:
+            hysteresis.check(k_storeys, float(getattr(building, "damping_ratio", 0.05)))
+            storeys = [storey_spec(hysteresis, k_storeys[i], hysteresis.yield_shear[i]) for i in range(n)]
         init = []
         for name, values in (("x0", x0), ("v0", v0)):
             arr = np.zeros(n) if values is None or values[b] is None else np.asarray(values[b], dtype=float)
             if arr.size != n:
                 raise ValueError(f"{name}[{b}] has {arr.size} values; building {b} has {n} floors")
             init.append(arr.tolist())
+        fy = (np.asarray(hysteresis.yield_shear, dtype=float) if hysteresis is not None
+              and np.size(hysteresis.yield_shear) == n else np.zeros(n))
         spec_buildings.append(dict(mass=np.asarray(building.masses, dtype=float).tolist(),
-                                   k=_storey_stiffnesses(building).tolist(), a0=a0, a1=a1,
-                                   x0=init[0], v0=init[1]))
+                                   k=k_storeys.tolist(), a0=a0, a1=a1, x0=init[0], v0=init[1],
+                                   storeys=storeys, Fy=fy.tolist(),
+                                   alpha=float(hysteresis.alpha) if hysteresis is not None else 0.0))
     spec_ground = None
     if ground is not None:
         if not (hasattr(ground, "times") and hasattr(ground, "acceleration")):
@@ -207,23 +272,28 @@ def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time
                                   gap=float(contact.gap)))
     return dict(buildings=spec_buildings, ground=spec_ground, contacts=spec_contacts, stop_time=stop_time,
                 dt=dt, material=material, tol=float(tol), max_iter=int(max_iter),
-                max_subdivisions=int(max_subdivisions))
+                max_subdivisions=int(max_subdivisions), record_storeys=bool(record_storeys))
 
 
 # -- the parent side -----------------------------------------------------------------------------------
 def run_opensees(buildings: Sequence, ground, contacts: Sequence, stop_time: float, dt: float,
                  x0=None, v0=None, material: str = "JankowskiImpact", *, tol: float = 1e-12,
-                 max_iter: int = 25, max_subdivisions: int = 4, timeout: float | None = None) -> PeerResult:
+                 max_iter: int = 25, max_subdivisions: int = 4, timeout: float | None = None,
+                 hystereses: Sequence | None = None, record_storeys: bool = False) -> PeerResult:
     """Solve the scene with OpenSees (Newmark average acceleration, fixed ``dt`` in s).
 
     Same plain inputs as :func:`cosim.peers.reference.solve_reference`.  ``tol`` (m) is the
     ``NormDispIncr`` tolerance: far below the penetrations (1e-5-1e-3 m) so that the
-    iteration error does not mask the time-step error.  Raises ``RuntimeError`` if
+    iteration error does not mask the time-step error.  ``hystereses``: the storey law of
+    each building (as :func:`cosim.peers.reference.solve_reference`); ``record_storeys`` also
+    returns every step's storey shears (``PeerResult.storey_shear``, the hysteretic energy;
+    off by default: reading them costs analysis time).  Raises ``RuntimeError`` if
     openseespy is not usable; a step that fails every fallback ends the run with
     ``converged = False`` and the history up to there.
     """
     spec = model_description(buildings, ground, contacts, stop_time, dt, x0, v0, material, tol=tol,
-                             max_iter=max_iter, max_subdivisions=max_subdivisions)
+                             max_iter=max_iter, max_subdivisions=max_subdivisions, hystereses=hystereses,
+                             record_storeys=record_storeys)
     if opensees_library_dir() is None and importlib.util.find_spec("openseespy") is None:
         raise RuntimeError("openseespy is not installed (pip install openseespy, extra 'bench')")
     with tempfile.TemporaryDirectory(prefix="opensees_peer_") as tmp:
@@ -255,6 +325,7 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
         stored = contact["k"] * d[-1] ** (contact["n"] + 1.0) / (contact["n"] + 1.0) if on.size and on[-1] else 0.0
         dissipated += loop - stored
     peak_u = np.max(np.abs(u), axis=0) if u.size else np.zeros(offsets[-1])
+    storeys = _storey_results(spec, u, arrays["storey_shear"], offsets)
     return PeerResult(
         material=spec["material"], dt=spec["dt"], converged=bool(summary["converged"]), t=t, u=u,
         contact_force=F, penetration=delta, peak_force_N=float(np.max(F)) if F.size else 0.0,
@@ -262,7 +333,37 @@ def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
         peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(offsets[:-1], offsets[1:])),
         floor_offsets=offsets, wall_time_s=float(summary["wall_time_s"]),
         build_time_s=float(summary["build_time_s"]), algorithms=summary["algorithms"],
-        subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"])
+        subdivided_steps=int(summary["subdivided_steps"]), message=summary["message"], **storeys)
+
+
+def _storey_results(spec: dict, u: np.ndarray, shear: np.ndarray, offsets) -> dict:
+    """Per building: peak drifts, ductility, residual drifts, hysteretic energy (PeerResult)."""
+    peaks, mus, residuals, energies = [], [], [], []
+    s0 = 0
+    for b, building in enumerate(spec["buildings"]):
+        o0, o1 = offsets[b], offsets[b + 1]
+        n = o1 - o0
+        drift = np.diff(u[:, o0:o1], axis=1, prepend=0.0) if u.size else np.zeros((1, n))
+        k, fy = np.asarray(building["k"]), np.asarray(building["Fy"])
+        V = shear[:, s0:s0 + n]
+        s0 += n
+        peak = np.max(np.abs(drift), axis=0)
+        peaks.append(peak)
+        mus.append(np.where(fy > 0.0, peak * k / np.where(fy > 0.0, fy, 1.0), 0.0))
+        yielding = building["storeys"] is not None
+        residuals.append(drift[-1] - V[-1] / k if yielding else np.zeros(n))
+        energy = 0.0 if not yielding else math.nan
+        if yielding and V.shape[0] == drift.shape[0]:
+            # the trapezoid of V over d (Newmark average acceleration conserves it) minus the
+            # elastic energy the storeys still hold
+            work = float(np.sum(0.5 * (V[1:] + V[:-1]) * np.diff(drift, axis=0)))
+            alpha = building["alpha"]
+            q = V[-1] - alpha * k * drift[-1]
+            stored = float(np.sum(0.5 * alpha * k * drift[-1] ** 2 + q * q / (2.0 * (1.0 - alpha) * k)))
+            energy = work - stored
+        energies.append(energy)
+    return dict(peak_drifts=tuple(peaks), ductility=tuple(mus), residual_drifts=tuple(residuals),
+                hysteretic_energy_J=tuple(energies), storey_shear=shear)
 
 
 def opensees_for_scene(scene, dt: float, material: str | None = None, overrides: dict | None = None,
@@ -276,6 +377,7 @@ def opensees_for_scene(scene, dt: float, material: str | None = None, overrides:
         if len(materials) > 1:
             raise ValueError(f"the scene's contacts need several OpenSees materials {sorted(materials)}: give one")
         material = materials.pop()
+    options.setdefault("hystereses", inputs.get("hystereses"))
     return run_opensees(inputs["buildings"], inputs["ground"], inputs["contacts"], inputs["stop_time"], dt,
                         inputs.get("x0"), inputs.get("v0"), material, **options)
 

@@ -49,8 +49,22 @@ def _preload_libraries() -> None:
             ctypes.CDLL(str(path), mode=ctypes.RTLD_GLOBAL)
 
 
+def _storey_material(ops, mat: int, k: float, damping: float, storey: dict | None) -> None:
+    """The storey spring's material: ``Elastic`` with the stiffness-proportional damping
+    tangent for a linear storey; ``Steel01`` or ``BoucWen`` (arguments given by the parent,
+    :func:`cosim.peers.opensees.storey_spec`) for a yielding one, whose damping is a separate
+    dashpot element (see :func:`_build`)."""
+    if storey is None:
+        ops.uniaxialMaterial("Elastic", mat, k, damping)                 # storey spring + a1 K dashpot
+    elif storey["material"] == "Steel01":
+        ops.uniaxialMaterial("Steel01", mat, *storey["args"])
+    else:
+        ops.uniaxialMaterial("BoucWen", mat, *storey["args"][:-1], int(storey["args"][-1]))
+
+
 def _build(ops, spec: dict):
-    """Define the model; returns floor node tags (global dof order) and contact element tags."""
+    """Define the model; returns floor node tags (global dof order), contact element tags and
+    storey element tags (global storey order)."""
     ops.wipe()
     ops.model("basic", "-ndm", 1, "-ndf", 1)
     ground_node = 1
@@ -60,16 +74,24 @@ def _build(ops, spec: dict):
     mat = 0
     floors = []
     initial = []
+    storey_tags = []
     for b in spec["buildings"]:
         below = ground_node
-        for m, k, x0, v0 in zip(b["mass"], b["k"], b["x0"], b["v0"]):
+        storeys = b.get("storeys") or [None] * len(b["mass"])
+        for m, k, x0, v0, storey in zip(b["mass"], b["k"], b["x0"], b["v0"], storeys):
             tag += 1
             node = tag
             ops.node(node, 0.0, "-mass", m)
             floors.append(node)
             mat += 1
-            ops.uniaxialMaterial("Elastic", mat, k, b["a1"] * k)      # storey spring + a1 K dashpot
+            _storey_material(ops, mat, k, b["a1"] * k, storey)
             ops.element("zeroLength", 1000 + mat, below, node, "-mat", mat, "-dir", 1)
+            storey_tags.append(1000 + mat)
+            if storey is not None and b["a1"] > 0.0:
+                # the a1 K part of Rayleigh damping on the initial stiffness, beside the yielding spring
+                mat += 1
+                ops.uniaxialMaterial("Elastic", mat, 0.0, b["a1"] * k)
+                ops.element("zeroLength", 1000 + mat, below, node, "-mat", mat, "-dir", 1)
             if b["a0"] > 0.0:
                 mat += 1
                 ops.uniaxialMaterial("Elastic", mat, 0.0, b["a0"] * m)  # a0 M dashpot to the ground
@@ -108,7 +130,7 @@ def _build(ops, spec: dict):
     ops.algorithm("Newton")
     ops.integrator("Newmark", 0.5, 0.25)
     ops.analysis("Transient")
-    return floors, contact_tags
+    return floors, contact_tags, storey_tags
 
 
 def _advance(ops, dt: float, depth: int, spec: dict, stats: dict) -> bool:
@@ -132,7 +154,7 @@ def _worker(spec: dict) -> tuple[dict, dict]:
     import openseespy.opensees as ops
 
     t0 = time.perf_counter()
-    floors, contact_tags = _build(ops, spec)
+    floors, contact_tags, storey_tags = _build(ops, spec)
     build_time = time.perf_counter() - t0
     offsets = np.concatenate(([0], np.cumsum([len(b["mass"]) for b in spec["buildings"]])))
     dofs = [(offsets[c["left"]] + c["left_floor"] - 1, offsets[c["right"]] + c["right_floor"] - 1, c["gap"])
@@ -144,7 +166,13 @@ def _worker(spec: dict) -> tuple[dict, dict]:
     t = np.zeros(n_steps + 1)
     u = np.zeros((n_steps + 1, len(floors)))
     force = np.zeros((n_steps + 1, len(contact_tags)))
+    # storey shears (restoring, without damping) at every step only when asked: the loops and
+    # the hysteretic energy need them, the peaks and the residual drift only the last step's
+    shear_history = spec.get("record_storeys", False)
+    shear = np.zeros((n_steps + 1 if shear_history else 1, len(storey_tags)))
     u[0] = [ops.nodeDisp(node, 1) for node in floors]
+    if shear_history:
+        shear[0] = [ops.eleResponse(etag, "basicForce")[0] for etag in storey_tags]
     stats = {"algorithms": {}, "subdivided_steps": 0}
     converged, message, k = True, "", 0
     t_start = time.perf_counter()
@@ -158,12 +186,18 @@ def _worker(spec: dict) -> tuple[dict, dict]:
         u[k] = [ops.nodeDisp(node, 1) for node in floors]
         for c, etag in enumerate(contact_tags):
             force[k, c] = max(0.0, -ops.eleResponse(etag, "basicForce")[0])
+        if shear_history:
+            shear[k] = [ops.eleResponse(etag, "basicForce")[0] for etag in storey_tags]
     wall = time.perf_counter() - t_start
+    if not shear_history:
+        shear[0] = [ops.eleResponse(etag, "basicForce")[0] for etag in storey_tags]
     ops.wipe()
     t, u, force = t[:k + 1], u[:k + 1], force[:k + 1]
+    if shear_history:
+        shear = shear[:k + 1]
     delta = np.column_stack([u[:, i] - u[:, j] - gap for i, j, gap in dofs]) if dofs else np.zeros((t.size, 0))
     summary = dict(converged=converged, message=message, wall_time_s=wall, build_time_s=build_time, **stats)
-    return dict(t=t, u=u, force=force, delta=delta), summary
+    return dict(t=t, u=u, force=force, delta=delta, storey_shear=shear), summary
 
 
 def _worker_main(argv: Sequence[str]) -> int:

@@ -63,12 +63,25 @@ integration (Uang & Bertero 1990, relative formulation)::
 separation, no stored energy left) it is the energy the contact dissipated; summed over the
 impacts it is ``dissipated_energy_J``.
 
+Yielding storeys (``hystereses``: bilinear with kinematic hardening, Bouc-Wen) are the
+storey part of the same system, :mod:`cosim.peers.storeys`: bilinear storeys switch between
+elastic and yielding at located events (their own phases, as the contacts have), Bouc-Wen
+storeys carry their hysteretic variable as states, and every yielding building carries its
+hysteretic energy, so that the balance becomes::
+
+    residual = E_input + E_kinetic(0) + E_strain(0)
+               - (E_kinetic + E_strain + E_damping + E_hysteretic + W_contact)
+
+with ``E_strain`` the elastic (stored) part.  A scene without yielding storeys is integrated
+with exactly the arithmetic of the linear reference.
+
 Indices: buildings are 0-based positions in the ``buildings`` sequence; floors are numbered
 as in :class:`~fmu_src.shear_building.ShearBuilding` and the FMU variables ``F[i]``, ``x[i]``:
 1 is the lowest floor.
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -78,7 +91,11 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
+from fmu_src.hysteresis import StoreyHysteresis
+
 from ..master.models import contact_law, ground_record, initial_state, shear_building
+from ..master.names import element_name
+from .storeys import EVENT_KINDS as STOREY_EVENTS, Storeys
 
 OPEN, APPROACH, RESTITUTION, STICK = "open", "approach", "restitution", "stick"
 METHODS = ("DOP853", "Radau", "RK45", "BDF", "LSODA")
@@ -163,6 +180,7 @@ class Energies:
     contact_work: np.ndarray
     contact_stored: np.ndarray
     residual: np.ndarray
+    hysteretic: np.ndarray | None = None     # dissipated by yielding storeys (None: none yield)
 
     @property
     def contact_dissipated(self) -> np.ndarray:
@@ -180,6 +198,14 @@ class ReferenceResult:
 
     Cost counters follow ``scipy.integrate.OdeResult``: ``nfev``, ``njev``, ``nlu``; plus
     ``n_segments`` (restarts) and ``wall_time_s``.
+
+    Storeys (every storey of every building side by side, storey 1 of the first building
+    first; :meth:`drifts`, :meth:`shears` for one building): ``storey_drift`` (m) and
+    ``storey_shear`` (N, restoring, without damping) on the output grid; per building
+    ``peak_drifts`` (m, located on the dense output), ``ductility`` (peak drift / yield drift,
+    0 without a yield shear, as the FMU's ``mu``), ``residual_drifts`` (m, ``d - V / k`` at the
+    end, 0 for linear storeys, as the FMU's ``drift_residual``) and ``hysteretic_energy_J``
+    (dissipated by yielding up to the end).
     """
 
     t: np.ndarray
@@ -192,7 +218,6 @@ class ReferenceResult:
     peak_force_N: float
     dissipated_energy_J: float
     peak_displacements: tuple[np.ndarray, ...]   # per building, per floor: max |u| (m)
-    peak_drifts: tuple[np.ndarray, ...]          # per building, per storey: max |u_i - u_(i-1)| (m)
     peak_accelerations: tuple[np.ndarray, ...]   # per building, per floor: max |absolute acceleration| (m/s^2)
     t_steps: np.ndarray
     floor_offsets: tuple[int, ...]
@@ -204,6 +229,14 @@ class ReferenceResult:
     n_segments: int
     wall_time_s: float
     event_counts: dict = field(default_factory=dict)   # located events by kind
+    storey_drift: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    storey_shear: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    storey_offsets: tuple[int, ...] = ()
+    peak_drifts: tuple[np.ndarray, ...] = ()
+    ductility: tuple[np.ndarray, ...] = ()
+    residual_drifts: tuple[np.ndarray, ...] = ()
+    hysteretic_energy_J: tuple[float, ...] = ()
+    yielding_buildings: tuple[int, ...] = ()      # indices of the buildings with yielding storeys
 
     graze_list: tuple[Impact, ...] = ()                # contacts shallower than their graze_depth
 
@@ -230,6 +263,14 @@ class ReferenceResult:
         """Floor velocities (m/s, relative to the ground) of one building."""
         return self.v[:, self.floor_offsets[building]:self.floor_offsets[building + 1]]
 
+    def drifts(self, building: int) -> np.ndarray:
+        """Storey drifts (m) of one building on the output grid, shape (n_t, n_storeys)."""
+        return self.storey_drift[:, self.storey_offsets[building]:self.storey_offsets[building + 1]]
+
+    def shears(self, building: int) -> np.ndarray:
+        """Storey shears (N) of one building on the output grid, shape (n_t, n_storeys)."""
+        return self.storey_shear[:, self.storey_offsets[building]:self.storey_offsets[building + 1]]
+
 
 # -- ground motion ------------------------------------------------------------------------------
 def _ground(ground, stop_time: float):
@@ -248,7 +289,7 @@ def _ground(ground, stop_time: float):
 class _System:
     """Global matrices, contact topology and the right-hand side for one phase assignment."""
 
-    def __init__(self, buildings, contacts, ag):
+    def __init__(self, buildings, contacts, ag, hystereses=None):
         self.buildings = list(buildings)
         sizes = [len(b.masses) for b in self.buildings]
         self.offsets = tuple(int(x) for x in np.concatenate(([0], np.cumsum(sizes))))
@@ -265,9 +306,14 @@ class _System:
         self.dof_right = np.array([self.offsets[c.right] + c.right_floor - 1 for c in self.contacts], dtype=np.intp)
         self.gaps = np.array([c.gap for c in self.contacts], dtype=float)
         self.ag = ag
-        # state layout: [u (n), v (n), E_input, E_damping, W_contact (one per contact)]; the
+        # state layout: [u (n), v (n), E_input, E_damping, W_contact (one per contact), then the
+        # storeys' states (z of Bouc-Wen storeys, E_hysteretic per yielding building)]; the
         # work is kept per contact so that impacts overlapping in time are charged separately
-        self.size = 2 * n + 2 + len(self.contacts)
+        self.storeys = Storeys(self.buildings, hystereses, self.offsets, 2 * n + 2 + len(self.contacts))
+        self.size = 2 * n + 2 + len(self.contacts) + self.storeys.size
+        # the linear buildings' stiffness (the yielding storeys' forces come from self.storeys)
+        self.K_linear = self.K * np.outer(self.storeys.linear_floor, self.storeys.linear_floor)
+        self.storey_state = None   # the yielding storeys' law of the segment being integrated (rhs)
 
     def kinematics(self, y):
         """Penetrations ``delta`` (m) and rates ``delta'`` (m/s) of every contact."""
@@ -287,10 +333,24 @@ class _System:
             forces[stuck] = self.holding_forces(y, forces, stuck)
         return forces, rate
 
+    def restoring_force(self, y):
+        """Storey and damping forces on the floors [N] at state ``y``, with the yielding storeys'
+        law of the current segment (the one :meth:`rhs` was last built for)."""
+        n = self.n
+        u, v = y[:n], y[n:2 * n]
+        storeys = self.storeys
+        if not storeys.inelastic:
+            return -(self.K @ u) - self.C @ v
+        K_storeys, p_storeys = storeys.segment_terms(self.storey_state)
+        f = -((self.K_linear + K_storeys) @ u) - self.C @ v - p_storeys
+        z = y[storeys.i_z:storeys.i_h]
+        if z.size:
+            f += storeys.Z @ z
+        return f
+
     def free_rates(self, y, forces):
         """``delta''`` of every contact with the given contact forces [N] (the ground cancels)."""
-        n = self.n
-        f = -(self.K @ y[:n]) - self.C @ y[n:2 * n]
+        f = self.restoring_force(y)
         np.subtract.at(f, self.dof_left, forces)
         np.add.at(f, self.dof_right, forces)
         a = self.minv * f
@@ -324,15 +384,28 @@ class _System:
             out.append(float(self.free_rates(y, forces)[c]))
         return out
 
-    def rhs(self, phases, v_imp):
+    def rhs(self, phases, v_imp, storey_state=None):
+        self.storey_state = storey_state   # the segment's storey law, for restoring_force
         n = self.n
         K, C, minv, masses, ag = self.K, self.C, self.minv, self.masses, self.ag
         left, right = self.dof_left, self.dof_right
         any_closed = any(p != OPEN for p in phases)
+        nc = len(self.contacts)
+        storeys = self.storeys
+        yielding = storeys.inelastic
+        if yielding:
+            K_storeys, p_storeys = storeys.segment_terms(storey_state)
+            K = self.K_linear + K_storeys
+            Z, iz, ih = storeys.Z, storeys.i_z, storeys.i_h
 
         def fun(t, y):
             u, v = y[:n], y[n:2 * n]
             f = -(K @ u) - C @ v
+            if yielding:
+                z = y[iz:ih]
+                f -= p_storeys
+                if z.size:
+                    f += Z @ z
             work = 0.0
             if any_closed:
                 forces, rate = self.contact_forces(y, phases, v_imp)
@@ -345,7 +418,9 @@ class _System:
             dy[n:2 * n] = minv * f - a_g
             dy[2 * n] = -a_g * float(masses @ v)
             dy[2 * n + 1] = float(v @ (C @ v))
-            dy[2 * n + 2:] = work
+            dy[2 * n + 2:2 * n + 2 + nc] = work
+            if yielding:
+                dy[iz:ih], dy[ih:] = storeys.rates(u, v, z, storey_state)
             return dy
         return fun
 
@@ -479,7 +554,7 @@ def _event(fun, direction):
 # -- the solver -----------------------------------------------------------------------------------
 def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], stop_time: float,
                     x0: Sequence | None = None, v0: Sequence | None = None, *,
-                    t_output: np.ndarray | None = None, output_dt: float = 1e-3,
+                    hystereses: Sequence | None = None, t_output: np.ndarray | None = None, output_dt: float = 1e-3,
                     method: str = "DOP853", rtol: float = 1e-10, atol: float | None = None,
                     break_at_samples: bool = True, max_step: float = math.inf) -> ReferenceResult:
     """Solve a pounding scene as one ODE system (see module docstring).
@@ -498,10 +573,15 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
     x0, v0 : sequence of arrays, optional
         Initial floor displacements (m) and velocities (m/s) relative to the ground, one
         array per building; zero by default.  No contact may be closed at ``t = 0``.
+    hystereses : sequence of StoreyHysteresis or None, optional
+        The storey law of each building (:class:`fmu_src.hysteresis.StoreyHysteresis`; None or
+        a missing list: linear), checked as ``building.fmu`` checks it (ValueError naming the
+        parameter).  Yielding storeys start elastic (an initial drift beyond yield is refused).
     t_output : array, optional
         Output grid (s); default ``0, output_dt, ..., stop_time``.
     method : str
-        ``solve_ivp`` method; ``DOP853`` (default) or ``Radau`` (analytic Jacobian).
+        ``solve_ivp`` method; ``DOP853`` (default) or ``Radau`` (analytic Jacobian; with
+        yielding storeys a finite-difference one).
     rtol, atol : float
         Tolerances; ``atol`` defaults to ``rtol`` times 1e-2 m, 1e-1 m/s and 1 kJ for
         displacements, velocities and energies (scales below any quantity that matters:
@@ -523,12 +603,14 @@ def solve_reference(buildings: Sequence, ground, contacts: Sequence[Contact], st
         raise ValueError(f"rtol = {rtol!r} is outside 0 < rtol < 1e-2")
     _check_contacts(buildings, contacts)
     ag, breakpoints = _ground(ground, stop_time)
-    system = _System(buildings, contacts, ag)
+    system = _System(buildings, contacts, ag, hystereses)
     y0 = _initial_state(system, x0, v0)
+    storey_state = system.storeys.initial(y0)
     t_output = _output_grid(stop_time, output_dt, t_output)
     breaks = np.unique(np.append(breakpoints[(breakpoints > 0) & (breakpoints < stop_time)]
                                  if break_at_samples else np.empty(0), stop_time))
-    run = _Integration(system, method, rtol, _tolerances(system, rtol, atol), max_step, t_output, y0)
+    run = _Integration(system, method, rtol, _tolerances(system, rtol, atol), max_step, t_output, y0,
+                       storey_state)
     run.march(breaks, stop_time)
     return run.result(t_start)
 
@@ -567,8 +649,11 @@ def _tolerances(system: "_System", rtol: float, atol: float | None):
     # (1e-9 J) Radau's Newton iteration on the contact work cannot converge at an onset
     # whose dashpot grows like delta^((n-1)/2) (Jankowski: the step collapses to nothing);
     # 1e3 rtol J is still 1e-6 of a 1 kJ impact.
+    # The storeys' states: the Bouc-Wen variable z is of order 1; hysteretic energies as above.
+    storeys = system.storeys
     return np.concatenate((np.full(n, 1e-2 * rtol), np.full(n, 1e-1 * rtol),
-                           np.full(2 + len(system.contacts), 1e3 * rtol)))
+                           np.full(2 + len(system.contacts), 1e3 * rtol),
+                           np.full(storeys.bw.size, rtol), np.full(storeys.size - storeys.bw.size, 1e3 * rtol)))
 
 
 def _output_grid(stop_time: float, output_dt: float, t_output) -> np.ndarray:
@@ -590,8 +675,9 @@ class _Integration:
     """
 
     def __init__(self, system: "_System", method: str, rtol: float, atol, max_step: float,
-                 t_output: np.ndarray, y0: np.ndarray):
+                 t_output: np.ndarray, y0: np.ndarray, storey_state=None):
         self.system = system
+        self.storey_state = storey_state if storey_state is not None else system.storeys.initial(y0)
         self.method, self.rtol, self.atol, self.max_step = method, rtol, atol, max_step
         nc = len(system.contacts)
         self.phases = [OPEN] * nc
@@ -602,14 +688,19 @@ class _Integration:
         self.impacts: list[Impact] = []
         self.t_output, self.y0 = t_output, y0
         self.y_out = np.empty((t_output.size, system.size))
+        self.V_out = np.empty((t_output.size, system.storeys.count))
         self.step_t: list[np.ndarray] = [np.array([0.0])]
         self.nfev = self.njev = self.nlu = self.segments = 0
         self.first_step = None
         self.out_index = 0
         if t_output.size and t_output[0] == 0.0:
             self.y_out[0] = y0
+            self.V_out[0] = system.storeys.shears(y0[None, :], self.storey_state)[0]
             self.out_index = 1
-        self.peaks = _PeakTracker(system, y0)
+        self.peaks = _PeakTracker(np.abs(y0[:system.n]))
+        D = system.storeys.D
+        self.drift_peaks = _PeakTracker(np.abs(D @ y0[:system.n]), D)
+        self.acceleration_peaks = _AccelerationTracker(system, y0)
 
     def march(self, breaks: np.ndarray, stop_time: float) -> None:
         """Integrate from 0 to ``stop_time``: one segment to the next event or breakpoint at a time."""
@@ -628,13 +719,21 @@ class _Integration:
     def _segment(self, t: float, t_end: float, y: np.ndarray) -> tuple[float, np.ndarray]:
         """One ``solve_ivp`` run with the current phases, up to ``t_end`` or the first event."""
         system, phases, v_imp = self.system, self.phases, self.v_imp
+        storeys, storey_state = system.storeys, self.storey_state
+        probe = storey_state.probe
+        if probe:
+            t_end = min(t_end, t + probe)       # a short segment to find which side a kink function is on
         if self.first_step is not None:
             self.first_step = min(self.first_step, t_end - t)
         event_list = system.events(phases, v_imp, self.overlap)
+        if storeys.inelastic:
+            event_list += storeys.events(storey_state)
         kwargs = {}
-        if self.method in ("Radau", "BDF", "LSODA") and STICK not in phases:
-            kwargs["jac"] = system.jacobian(phases, v_imp)   # (finite differences while a contact sticks)
-        sol = solve_ivp(system.rhs(phases, v_imp), (t, t_end), y, method=self.method, rtol=self.rtol,
+        if self.method in ("Radau", "BDF", "LSODA") and not storeys.inelastic and STICK not in phases:
+            # (finite differences while a contact sticks or storeys yield)
+            kwargs["jac"] = system.jacobian(phases, v_imp)
+        fun = system.rhs(phases, v_imp, storey_state)
+        sol = solve_ivp(fun, (t, t_end), y, method=self.method, rtol=self.rtol,
                         atol=self.atol, events=[e[0] for e in event_list], dense_output=True,
                         first_step=self.first_step, max_step=self.max_step, **kwargs)
         if sol.status < 0:
@@ -650,12 +749,18 @@ class _Integration:
             if sol.status == 1 and sol.t.size >= 3:   # the event step is truncated: use the one before
                 self.first_step = float(sol.t[-2] - sol.t[-3])
         self.step_t.append(sol.t[1:])
-        self.peaks.update(sol, list(phases), v_imp.copy())
+        self.peaks.update(sol)
+        self.drift_peaks.update(sol)
+        # the segment's right-hand side with its phases, impact speeds and storey state frozen: the
+        # tracker may evaluate it after later events have changed them (self.phases is mutated)
+        self.acceleration_peaks.update(sol, fun, any(p != OPEN for p in phases), lambda: system.rhs(
+            list(phases), v_imp.copy(), copy.deepcopy(storey_state)))
 
         # output grid points inside (t, t_new]
         stop = np.searchsorted(self.t_output, t_new, side="right")
         if stop > self.out_index:
             self.y_out[self.out_index:stop] = sol.sol(self.t_output[self.out_index:stop]).T
+            self.V_out[self.out_index:stop] = storeys.shears(self.y_out[self.out_index:stop], storey_state)
             self.out_index = stop
 
         # contact bookkeeping on this segment
@@ -670,7 +775,13 @@ class _Integration:
             fired = [(len(te) and te[0], k) for k, te in enumerate(sol.t_events) if len(te)]
             _, k = min(fired)
             _, c, kind = event_list[k]
-            self._event(kind, c, t_new, y_new)
+            if kind in STOREY_EVENTS:
+                self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
+                storeys.apply(kind, c, y_new, fun(t_new, y_new), storey_state)
+            else:
+                self._event(kind, c, t_new, y_new)
+        elif probe:
+            storeys.after_probe(y_new, storey_state)
         return t_new, y_new
 
     def _event(self, kind: str, c: int, t: float, y: np.ndarray) -> None:
@@ -713,14 +824,36 @@ class _Integration:
         # histories on the output grid (phases re-derived from the impact list)
         u_out, v_out = y_out[:, :n], y_out[:, n:2 * n]
         forces, deltas, stored = _force_history(system, t_output, y_out, impacts)
-        contact_work = y_out[:, 2 * n + 2:].sum(axis=1)
+        storeys = system.storeys
+        nc = len(system.contacts)
+        contact_work = y_out[:, 2 * n + 2:2 * n + 2 + nc].sum(axis=1)
         kinetic = 0.5 * np.einsum("ij,j,ij->i", v_out, system.masses, v_out)
-        strain = 0.5 * np.einsum("ij,jk,ik->i", u_out, system.K, u_out)
+        strain = 0.5 * np.einsum("ij,jk,ik->i", u_out, system.K_linear, u_out)
+        drift_out = u_out @ storeys.D.T
+        hysteretic = None
+        if storeys.inelastic:
+            strain = strain + storeys.yielding_strain_energy(drift_out, self.V_out)
+            hysteretic = y_out[:, storeys.i_h:].sum(axis=1)
+        # the initial state is elastic: every storey holds k d^2 / 2
         e0 = 0.5 * float(y0[n:2 * n] @ (system.masses * y0[n:2 * n])) + 0.5 * float(y0[:n] @ system.K @ y0[:n])
+        dissipated = kinetic + strain + y_out[:, 2 * n + 1] + contact_work
+        if hysteretic is not None:
+            dissipated = dissipated + hysteretic
         energies = Energies(input=y_out[:, 2 * n], kinetic=kinetic, strain=strain, damping=y_out[:, 2 * n + 1],
                             contact_work=contact_work, contact_stored=stored.sum(axis=1),
-                            residual=y_out[:, 2 * n] + e0 - (kinetic + strain + y_out[:, 2 * n + 1] + contact_work))
-        peak_u, peak_d, peak_a = self.peaks.refined()
+                            residual=y_out[:, 2 * n] + e0 - dissipated, hysteretic=hysteretic)
+        # the storeys at the end of the run, in the final storey state
+        y_end = self.y_end
+        V_end = storeys.shears(y_end[None, :], self.storey_state)[0]
+        residual_end = storeys.residual_drift(storeys.D @ y_end[:n], V_end)
+        peak_d = self.drift_peaks.refined()
+        mu = storeys.ductility(peak_d)
+        e_h = np.zeros(len(system.buildings))
+        for row, b in enumerate(storeys.yielding_buildings):
+            e_h[b] = float(y_end[storeys.i_h + row])
+        nb = len(system.buildings)
+        peak_u = self.peaks.refined()
+        peak_a = self.acceleration_peaks.refined()
         per_building = list(zip(system.offsets[:-1], system.offsets[1:]))
         return ReferenceResult(
             t=t_output, u=u_out, v=v_out, contact_force=forces, penetration=deltas, energies=energies,
@@ -729,11 +862,16 @@ class _Integration:
             peak_force_N=max((imp.peak_force_N for imp in impacts), default=0.0),
             dissipated_energy_J=float(sum(imp.dissipated_energy_J for imp in impacts)),
             peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in per_building),
-            peak_drifts=tuple(peak_d[o0:o1] for o0, o1 in per_building),
             peak_accelerations=tuple(peak_a[o0:o1] for o0, o1 in per_building),
             t_steps=np.concatenate(self.step_t), floor_offsets=system.offsets, method=self.method, rtol=self.rtol,
             nfev=self.nfev, njev=self.njev, nlu=self.nlu, n_segments=self.segments,
             wall_time_s=time.perf_counter() - t_start, event_counts=self.event_counts,
+            storey_drift=drift_out, storey_shear=self.V_out, storey_offsets=storeys.storey_offsets,
+            peak_drifts=tuple(storeys.of_building(peak_d, b) for b in range(nb)),
+            ductility=tuple(storeys.of_building(mu, b) for b in range(nb)),
+            residual_drifts=tuple(storeys.of_building(residual_end, b) for b in range(nb)),
+            hysteretic_energy_J=tuple(float(e) for e in e_h),
+            yielding_buildings=tuple(storeys.yielding_buildings),
         )
 
 
@@ -801,76 +939,110 @@ def _segment_peaks(system: _System, sol, c: int, phases, v_imp) -> tuple[float, 
 
 
 class _PeakTracker:
-    """Largest ``|u|`` (floor displacement), ``|u_i - u_(i-1)|`` (storey drift) and ``|a|``
-    (absolute floor acceleration ``M^-1 (-K u - C v + f_contact)``, the contact force of the
-    segment's phases included: the impact spikes) of every floor over the run.
+    """Largest ``|u|`` of every floor over the run (or of ``|P u|``, e.g. the storey drifts,
+    with a matrix ``transform = P``), from the dense output.
 
-    Each segment is sampled at its steps and 8 points inside each step; the segment holding a
-    quantity's best sample is kept with its phases, and :meth:`refined` polishes each maximum
-    with a bounded scalar search on that segment's interpolant (the grid alone is off by
-    ~(w h)^2 / 8).
+    Each segment is sampled at its steps and 8 points inside each step; the segment holding
+    a floor's best sample is kept, and :meth:`refined` polishes each maximum with a bounded
+    scalar search on that segment's interpolant (the grid alone is off by ~(w h)^2 / 8).
     """
 
-    def __init__(self, system: "_System", y0: np.ndarray):
-        self.system = system
-        n = system.n
-        drift = np.eye(n)
-        for o0, o1 in zip(system.offsets[:-1], system.offsets[1:]):
-            for i in range(o0 + 1, o1):
-                drift[i, i - 1] = -1.0      # storey i: u_i - u_(i-1); the lowest storey: u_1 - ground
-        self.drift = drift
-        self.value = np.zeros((3, n))
-        self.where: list[list] = [[None] * n for _ in range(3)]
-        u0, v0 = y0[:n], y0[n:2 * n]
-        self.value[0] = np.abs(u0)
-        self.value[1] = np.abs(drift @ u0)
-        self.value[2] = np.abs(self._acceleration(y0[:, None], [OPEN] * len(system.contacts),
-                                                  np.zeros(len(system.contacts)))[:, 0])
+    def __init__(self, initial: np.ndarray, transform: np.ndarray | None = None):
+        self.value = initial.copy()
+        self.where: list = [None] * initial.size
+        self.transform = transform
 
-    def _acceleration(self, ys: np.ndarray, phases, v_imp) -> np.ndarray:
-        """Absolute floor accelerations (n, points) of states ``ys`` (size, points)."""
-        system, n = self.system, self.system.n
-        f = -(system.K @ ys[:n]) - system.C @ ys[n:2 * n]
-        if any(p != OPEN for p in phases):
-            for k in range(ys.shape[1]):
-                forces, _ = system.contact_forces(ys[:, k], phases, v_imp)
-                np.subtract.at(f[:, k], system.dof_left, forces)
-                np.add.at(f[:, k], system.dof_right, forces)
-        return system.minv[:, None] * f
+    def _rows(self, states: np.ndarray) -> np.ndarray:
+        """The tracked functions of states (columns of the full state vector)."""
+        if self.transform is None:
+            return states[:self.value.size]
+        return self.transform @ states[:self.transform.shape[1]]
 
-    def _quantities(self, ys: np.ndarray, phases, v_imp) -> np.ndarray:
-        n = self.system.n
-        return np.abs(np.stack([ys[:n], self.drift @ ys[:n], self._acceleration(ys, phases, v_imp)]))
-
-    def update(self, sol, phases, v_imp) -> None:
+    def update(self, sol) -> None:
         ts = sol.t
         if ts.size < 2:
             return
         frac = np.linspace(0.0, 1.0, 9)[:-1]
         grid = np.append((ts[:-1, None] + np.diff(ts)[:, None] * frac).ravel(), ts[-1])
-        q = self._quantities(sol.sol(grid), phases, v_imp)          # (3, n, points)
-        best = np.argmax(q, axis=2)
-        for kind in range(3):
-            row = q[kind, np.arange(q.shape[1]), best[kind]]
-            for dof in np.flatnonzero(row > self.value[kind]):
-                k = best[kind, dof]
-                self.value[kind, dof] = row[dof]
-                self.where[kind][dof] = (sol.sol, grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)], phases, v_imp)
+        u = np.abs(self._rows(sol.sol(grid)))
+        best = np.argmax(u, axis=1)
+        for dof in np.flatnonzero(u[np.arange(u.shape[0]), best] > self.value):
+            k = best[dof]
+            self.value[dof] = u[dof, k]
+            self.where[dof] = (sol.sol, grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)])
 
-    def refined(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def refined(self) -> np.ndarray:
         out = self.value.copy()
-        for kind in range(3):
-            for dof, where in enumerate(self.where[kind]):
-                if where is None or where[2] <= where[1]:
-                    continue
-                interp, lo, hi, phases, v_imp = where
+        for dof, where in enumerate(self.where):
+            if where is None or where[2] <= where[1]:
+                continue
+            interp, lo, hi = where
+            if self.transform is None:
+                def value(tt, interp=interp, dof=dof):
+                    return -abs(interp(tt)[dof])
+            else:
+                def value(tt, interp=interp, row=self.transform[dof]):
+                    return -abs(float(row @ interp(tt)[:row.size]))
+            res = minimize_scalar(value, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12 * max(1.0, hi)})
+            out[dof] = max(out[dof], -float(res.fun))
+        return out
 
-                def minus(tt, kind=kind, dof=dof, interp=interp, phases=phases, v_imp=v_imp):
-                    return -float(self._quantities(interp(tt)[:, None], phases, v_imp)[kind, dof, 0])
 
-                res = minimize_scalar(minus, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12 * max(1.0, hi)})
-                out[kind, dof] = max(out[kind, dof], -float(res.fun))
-        return out[0], out[1], out[2]
+class _AccelerationTracker:
+    """Largest absolute floor acceleration ``|u'' + ag|`` of every floor over the run, from the
+    dense output and the segment's own right-hand side (contact forces of its phases, yielding
+    storeys, stick: the impact spikes included).
+
+    As :class:`_PeakTracker`: 8 samples per solver step, the best segment kept with its
+    right-hand side, each maximum polished by a bounded scalar search.  A segment without a
+    closed contact or yielding storeys is evaluated for all samples at once (linear in the state).
+    """
+
+    def __init__(self, system: "_System", y0: np.ndarray):
+        self.system = system
+        n = system.n
+        self.value = np.abs(system.minv * (-(system.K @ y0[:n]) - system.C @ y0[n:2 * n]))
+        self.where: list = [None] * n
+
+    def _values(self, fun, ts: np.ndarray, ys: np.ndarray, linear: bool) -> np.ndarray:
+        """|absolute acceleration| (n, points) at times ``ts`` of states ``ys`` (size, points)."""
+        system, n = self.system, self.system.n
+        if linear:
+            return np.abs(system.minv[:, None] * (-(system.K @ ys[:n]) - system.C @ ys[n:2 * n]))
+        return np.abs(np.column_stack([fun(t, ys[:, k])[n:2 * n] + float(system.ag(t))
+                                       for k, t in enumerate(ts)]))
+
+    def update(self, sol, fun, closed: bool, freeze) -> None:
+        """Sample segment ``sol`` (right-hand side ``fun``); ``freeze()``: ``fun`` with its
+        arguments copied, kept for :meth:`refined` when the segment holds a new maximum."""
+        ts = sol.t
+        if ts.size < 2:
+            return
+        linear = not closed and not self.system.storeys.inelastic
+        frac = np.linspace(0.0, 1.0, 9)[:-1]
+        grid = np.append((ts[:-1, None] + np.diff(ts)[:, None] * frac).ravel(), ts[-1])
+        a = self._values(fun, grid, sol.sol(grid), linear)
+        best = np.argmax(a, axis=1)
+        frozen = None
+        for dof in np.flatnonzero(a[np.arange(a.shape[0]), best] > self.value):
+            k = best[dof]
+            self.value[dof] = a[dof, k]
+            frozen = frozen or (fun if linear else freeze())
+            self.where[dof] = (sol.sol, grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)], frozen, linear)
+
+    def refined(self) -> np.ndarray:
+        out = self.value.copy()
+        for dof, where in enumerate(self.where):
+            if where is None or where[2] <= where[1]:
+                continue
+            interp, lo, hi, fun, linear = where
+
+            def minus(tt, interp=interp, fun=fun, linear=linear, dof=dof):
+                return -float(self._values(fun, np.array([tt]), interp(tt)[:, None], linear)[dof, 0])
+
+            res = minimize_scalar(minus, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12 * max(1.0, hi)})
+            out[dof] = max(out[dof], -float(res.fun))
+        return out
 
 
 def _force_history(system: _System, t_out, y_out, impacts):
@@ -912,11 +1084,17 @@ def scene_inputs(scene) -> dict:
     """Plain arguments of :func:`solve_reference` for a scene, with the FMUs' physics.
 
     Builds the same objects the slaves build in ``initialize()`` from the same parameter
-    values (:mod:`cosim.master.models`).  Contacts keep the scene's order.
+    values (:mod:`cosim.master.models`; the storey laws as ``StoreyHysteresis``).  Contacts keep
+    the scene's order.
     """
-    buildings, x0, v0 = [], [], []
+    buildings, x0, v0, hystereses = [], [], [], []
     for spec in scene.buildings:
         buildings.append(shear_building(spec))
+        floors = range(1, int(spec.value("n_storeys")) + 1)
+        hystereses.append(StoreyHysteresis(
+            str(spec.value("hysteresis")), [float(spec.value(element_name("Fy", i))) for i in floors],
+            float(spec.value("alpha")), float(spec.value("bw_n")), float(spec.value("bw_beta")),
+            float(spec.value("bw_gamma"))))
         x, v = initial_state(spec)
         x0.append(x)
         v0.append(v)
@@ -928,4 +1106,4 @@ def scene_inputs(scene) -> dict:
                                 int(level.floor_right), contact_law(spec), float(spec.value("gap")),
                                 float(spec.value("graze_depth"))))
     return dict(buildings=buildings, ground=ground, contacts=contacts, stop_time=float(scene.stop_time),
-                x0=x0, v0=v0)
+                x0=x0, v0=v0, hystereses=hystereses)

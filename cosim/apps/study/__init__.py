@@ -62,13 +62,15 @@ interrupted (the rows already written are kept).
 from __future__ import annotations
 
 from .cases import Axis, Case, case_id
-from .cluster import CONNECT_TIMEOUT_S, StudyPlugin, StudyResult, connect, fmu_hashes, run_study
+from .cluster import (CONNECT_TIMEOUT_S, WORKER_WAIT_S, ClusterLost, StudyPlugin, StudyResult, check_workers,
+                      connect, fmu_hashes, run_study)
+from .lock import StudyLock
 from .plot import plot_results
 from .results_io import STATUSES, columns_for, read_results, write_parquet
 from .runner import CaseRunner, case_row, validate_study
-from .spec import DEFAULT_ENERGY_TOLERANCE, Study, StudyError, bundled_studies, load_study, resolve_study
+from .spec import DEFAULT_ENERGY_TOLERANCE, MAX_CASES, Study, StudyError, bundled_studies, load_study, resolve_study
 
-__all__ = ["Axis", "Case", "case_id", "CONNECT_TIMEOUT_S", "StudyPlugin", "StudyResult", "connect", "fmu_hashes",
-           "run_study", "plot_results", "STATUSES", "columns_for", "read_results", "write_parquet", "CaseRunner",
+__all__ = ["Axis", "Case", "case_id", "CONNECT_TIMEOUT_S", "WORKER_WAIT_S", "ClusterLost", "StudyPlugin",
+           "StudyResult", "check_workers", "connect", "fmu_hashes", "run_study", "StudyLock", "MAX_CASES", "plot_results", "STATUSES", "columns_for", "read_results", "write_parquet", "CaseRunner",
            "case_row", "validate_study", "DEFAULT_ENERGY_TOLERANCE", "Study", "StudyError", "bundled_studies",
            "load_study", "resolve_study"]

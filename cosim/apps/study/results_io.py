@@ -14,6 +14,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .lock import LOCK_FILE, StudyLock
 from .spec import Study, StudyError
 
 STATUSES = ("ok", "failed", "unstable")
@@ -23,7 +24,8 @@ STRING_COLUMNS = ("case_id", "status", "error", "worker")  # never read back as 
 CASE_COLUMNS = ("case_id", "case")
 SUMMARY_COLUMNS = ("status", "error", "peak_force_N", "impacts", "dissipated_energy_J", "max_penetration_m",
                    "peak_impact_velocity_m_s", "first_impact_s")
-BUILDING_COLUMNS = ("peak_displacement_m", "peak_drift_m", "peak_base_shear_N")
+BUILDING_COLUMNS = ("peak_displacement_m", "peak_drift_m", "peak_base_shear_N", "peak_ductility", "residual_drift_m",
+                    "hysteretic_energy_J")
 TAIL_COLUMNS = ("energy_input_J", "energy_residual_relative", "stop_time_s", "communication_steps", "rollbacks",
                 "wall_time_s", "case_time_s", "worker")
 
@@ -124,31 +126,111 @@ class _RowWriter:
         self.file.close()
 
 
-def _prepare_folder(folder: Path, fingerprint: dict, header: list[str], resume: bool) -> set[str]:
-    """Create or reopen the output folder; return the ids of the cases already recorded."""
+class FolderClaim:
+    """A study folder claimed by :func:`claim_folder`: locked while the study writes.  ``written``:
+    set once the study wrote into it (until then a folder the claim created is removed again)."""
+
+    def __init__(self, folder: Path, created: list[Path], lock: StudyLock):
+        self.folder, self.created, self.lock, self.written = folder, created, lock, False
+
+    def __enter__(self) -> "FolderClaim":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.lock.release()
+        if not self.written:
+            for path in self.created:   # deepest first: the folder, then the parents it needed
+                try:
+                    path.rmdir()   # only if still empty: nothing of anyone's is removed
+                except OSError:
+                    break
+
+
+def claim_folder(folder: Path) -> FolderClaim:
+    """Check that ``folder`` may hold a study's results, create it if new, and lock it.
+
+    Allowed: a new path, an empty folder, or a study's own folder (it holds ``study.json`` or the
+    lock file); a regular file or a folder with anything else is refused, so that nothing the
+    study did not write is mixed with its results.  A second study writing to the folder is
+    refused naming the holder (:class:`~cosim.apps.study.lock.StudyLock`).
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise StudyError(f"--out {folder} is a file, not a folder: choose a new folder for the study's results")
+    if folder.exists():
+        entries = sorted(p.name for p in folder.iterdir())
+        if entries and "study.json" not in entries and LOCK_FILE not in entries:
+            raise StudyError(f"--out {folder} holds files that no study wrote ({', '.join(entries[:3])}"
+                             f"{', ...' if len(entries) > 3 else ''}): choose a new or empty folder")
+    created = []   # the folders this claim makes, deepest first
+    path = folder
+    while not os.path.lexists(path):
+        created.append(path)
+        path = path.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StudyError(f"--out {folder}: cannot create the folder ({exc.strerror})") from None
+    lock = StudyLock(folder)
+    try:
+        lock.acquire()
+    except BaseException:
+        FolderClaim(folder, created, lock).__exit__(None, None, None)
+        raise
+    return FolderClaim(folder, created, lock)
+
+
+def recorded_rows(folder: Path, fingerprint: dict, header: list[str], resume: bool) -> list[dict[str, Any]]:
+    """The rows already in a claimed folder (none in a new one), after the checks of ``--resume``:
+    without it a results file is refused; with it the study must be the same (``study.json``)
+    and have the same columns.  A last line torn by a kill is dropped."""
     csv_path, meta_path = folder / "results.csv", folder / "study.json"
+    if not (csv_path.exists() and csv_path.stat().st_size > 0):
+        return []
+    if not resume:
+        raise StudyError(f"{csv_path} already holds results: use --resume to complete it, "
+                         f"or --out for a new folder")
     fingerprint = json.loads(json.dumps(fingerprint))  # compare as stored (tuples -> lists)
-    if csv_path.exists() and csv_path.stat().st_size > 0:
-        if not resume:
-            raise StudyError(f"{csv_path} already holds results: use --resume to complete it, "
-                             f"or --out for a new folder")
-        if meta_path.exists():
-            saved = json.loads(meta_path.read_text())
-            changed = [k for k in fingerprint if saved.get(k) != fingerprint[k]]
-            if changed:
-                raise StudyError(f"--resume {folder}: the study changed since its rows were computed "
-                                 f"({', '.join(changed)} differ; new values of the varied variables are fine); "
-                                 f"use --out for a new folder")
-        text = csv_path.read_text(encoding="utf-8")
-        if not text.endswith("\n"):  # killed while writing a row: drop the torn line
-            with open(csv_path, "r+", encoding="utf-8") as f:
-                f.truncate(len(text[:text.rfind("\n") + 1].encode("utf-8")))
-        saved_header, rows = read_results(csv_path)
-        if saved_header != header:
-            raise StudyError(f"--resume {csv_path}: its columns differ from this study's; use --out for a new folder")
-        return {r["case_id"] for r in rows}
-    folder.mkdir(parents=True, exist_ok=True)
+    if meta_path.exists():
+        saved = json.loads(meta_path.read_text())
+        changed = [k for k in fingerprint if saved.get(k) != fingerprint[k]]
+        if changed:
+            raise StudyError(f"--resume {folder}: the study changed since its rows were computed "
+                             f"({', '.join(changed)} differ; new values of the varied variables are fine); "
+                             f"use --out for a new folder")
+    text = csv_path.read_text(encoding="utf-8")
+    if not text.endswith("\n"):  # killed while writing a row: drop the torn line
+        with open(csv_path, "r+", encoding="utf-8") as f:
+            f.truncate(len(text[:text.rfind("\n") + 1].encode("utf-8")))
+    saved_header, rows = read_results(csv_path)
+    if saved_header != header:
+        raise StudyError(f"--resume {csv_path}: its columns differ from this study's; use --out for a new folder")
+    return rows
+
+
+def start_results(folder: Path, fingerprint: dict, rows: Sequence[Mapping[str, Any]], retry_failed: bool) -> int:
+    """Write ``study.json`` into a folder without rows; with ``retry_failed``, drop the failed and
+    unstable rows (their cases run again).  Returns the number of rows dropped."""
+    if rows:
+        return _drop_failed_rows(folder / "results.csv", rows) if retry_failed else 0
+    meta_path = folder / "study.json"
     tmp = meta_path.with_name("study.json.partial")
     tmp.write_text(json.dumps(fingerprint, indent=2) + "\n")
     os.replace(tmp, meta_path)
-    return set()
+    return 0
+
+
+def _drop_failed_rows(csv_path: Path, rows: Sequence[Mapping[str, Any]]) -> int:
+    """Rewrite the CSV without its failed and unstable rows (each row is one line: :func:`_cell`);
+    the ok rows' lines are kept byte for byte.  Atomic: a kill leaves the old file or the new."""
+    lines = csv_path.read_text(encoding="utf-8").splitlines(keepends=True)
+    keep = [lines[0]] + [line for line, row in zip(lines[1:], rows) if row["status"] == "ok"]
+    dropped = len(lines) - len(keep)
+    if dropped:
+        tmp = csv_path.with_name(csv_path.name + ".partial")
+        with open(tmp, "w", encoding="utf-8", newline="") as f:
+            f.writelines(keep)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, csv_path)
+    return dropped
