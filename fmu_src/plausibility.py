@@ -48,7 +48,7 @@ class PlausibilityWatch:
     def __init__(self, law: ContactLaw):
         self.law = law
         self.reported = ()          # kinds reported during the current impact
-        self.impacts = 0            # contacts begun so far (impacts and grazes: the onsets)
+        self.impacts = 0            # impacts seen so far
         self.steps_open = 0         # steps since the last separation
         self.last_speed = 0.0       # m/s, approach speed of the previous impact
         self.in_a_row = 0           # multiplying impacts in a row
@@ -58,11 +58,11 @@ class PlausibilityWatch:
         found = []
         law, v = self.law, contact.v_imp
         energy = 0.5 * law.m * v * v
-        if contact.started > self.impacts:                      # new contact(s) this step (grazes too)
+        if contact.impacts > self.impacts:                      # new impact(s) this step
             quick = self.impacts > 0 and self.steps_open <= MULTIPLYING_STEPS \
                 and v >= MULTIPLYING_SPEED * self.last_speed
             self.in_a_row = self.in_a_row + 1 if quick else 0
-            self.impacts, self.last_speed, self.reported = contact.started, v, ()
+            self.impacts, self.last_speed, self.reported = contact.impacts, v, ()
             if self.in_a_row >= MULTIPLYING_COUNT:
                 found.append(("multiplying", (
                     f"impacts multiplying: {self.in_a_row + 1} impacts in a row, each within {MULTIPLYING_STEPS} "
@@ -87,7 +87,7 @@ class PlausibilityWatch:
                         f"time scales T = L / v_imp = {T:.3g} s (limit {PLAIN_STEP_LIMIT:g}): the dissipated energy is "
                         f"off by about {min(h / T, 1.0):.0%}; use resolve_impacts = true, or a step below "
                         f"{PLAIN_STEP_LIMIT * T:.3g} s")))
-                ended = not contact.in_contact and contact.started and contact.last_CR == contact.last_CR
+                ended = not contact.in_contact and contact.impacts and contact.last_CR == contact.last_CR
                 if ended and law.zeta > 0.0 and (contact.last_CR > REBOUND_LIMIT or contact.last_E < -1e-3 * energy):
                     found.append(("rebound", (
                         f"the impact ended faster than it began (rebound / approach {contact.last_CR:.4g} with a "
