@@ -160,6 +160,10 @@ class InstanceSpec:
             raise KeyError(declared_interface(self.fmu).unknown_variable_message(name, "parameter")) from None
 
 
+#: contact parameters the coupling strategy sets when the scene does not (System.initialize)
+COUPLING_DECLARED = ("host",)
+
+
 def _effective(spec: InstanceSpec, n_storeys: int | None = None) -> dict[str, Any]:
     """Every parameter of ``spec`` as its FMU gets it; array elements only up to ``n_storeys``."""
     values = dict(parameter_defaults(spec.fmu))
@@ -245,7 +249,10 @@ class Scene:
             out["ground"] = _effective(self.ground)
         out["buildings"] = {b.name: _effective(b, int(b.parameters["n_storeys"])) for b in self.buildings}
         if self.contacts:
-            values = [_effective(c) for c in self.contacts]
+            # a contact parameter the scene left unset that the coupling declares at initialization
+            # (System.initialize: host) stays unset, so that the coupling declares it again
+            values = [{k: v for k, v in _effective(c).items() if k not in COUPLING_DECLARED or k in c.parameters}
+                      for c in self.contacts]
             shared = {k: v for k, v in values[0].items() if all(k in x and x[k] == v for x in values[1:])}
             pounding: dict[str, Any] = {}
             pairs: dict[tuple[str, str], list[list[int]]] = {}
