@@ -72,7 +72,8 @@ class PlausibilityWatch:
         self.steps_open = 0 if contact.in_contact else self.steps_open + 1
         if v > 0.0:
             T = law.length_scale(v) / v
-            debt = getattr(getattr(contact, "observer", None), "debt", 0.0)
+            observer = getattr(contact, "observer", None)
+            debt = observer.owed() if observer is not None else 0.0
             if debt > TIMING_ENERGY_LIMIT * energy:
                 found.append(("timing_energy", (
                     f"the host received {debt:.4g} J more from the contact than the impact returns "

@@ -11,9 +11,12 @@ and HHT-alpha, each in Gauss-Seidel and in Jacobi order, none declaring anything
   impacts, peak force within 2 %, contact energy within 3 % of the monolithic reference
   (cosim.peers.reference, DOP853 at rtol 1e-10), and never more mechanical plus dissipated energy
   than was put in (1 % margin);
-* at 5 and 10 ms: within 10 % / 15 %.  Energy is created there, by hosts that apply the force
-  late, at the first impact (the FMU cannot know the host's timing before it has seen the host
-  respond to a force): every such run must have been warned about by the FMU.
+* at 5 and 10 ms: within 10 % / 15 %.  A host that applies the force late gains energy at the
+  first impact (the FMU cannot know the host's timing before it has seen the host respond to a
+  force); the FMU takes it back by withholding impulse (ImpactResolver._withhold): less than the
+  1 % margin is created in every host at 5 ms and by the two oscillators at 10 ms.  The shear
+  buildings at 10 ms (three contacts, each seeing the others' late impulses in its structural
+  motion) still create more in two Jacobi hosts: every such run must have been warned about.
 
 The whole matrix with its numbers: ``python benchmarks/host_matrix.py`` (docs/fmi_hosts.md).
 """
@@ -103,6 +106,11 @@ def test_coarse_steps_stay_within_bounds_and_never_create_energy_silently(unzip_
             assert v.warned, (name, integrator, order, v)
     # the Gauss-Seidel hosts exact for a held force create none at all (1 % margin)
     assert all(v.created <= hosts.ENERGY_MARGIN for _, i, o, v in verdicts if (i, o) == ("zoh", "gauss-seidel"))
+    # the first impact's pay-back: within the margin in every host at 5 ms, and for the two
+    # oscillators at 10 ms too (before it: up to 1.1 % at 5 ms, 9.7 % at 10 ms)
+    created = [(name, i, o, v.created) for name, i, o, v in verdicts
+               if v.created > hosts.ENERGY_MARGIN and (h < 1e-2 or name.startswith("two oscillators"))]
+    assert not created, created
 
 
 def test_the_issue_numbers_are_gone(unzip_dir, cases):

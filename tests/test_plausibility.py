@@ -62,30 +62,57 @@ def test_standard_kernels_sum_to_one_and_hht_reduces_to_newmark():
         ImpactResolver(law_for("hertz", 1e9, 1.5, 1.0, 1.0, 1.0), host="jacobi")
 
 
-def test_the_timing_energy_is_what_the_host_gains():
-    """The argument of docs/fmi_hosts.md: over an impact the host gains int C A dt more than the
-    contact takes from its own bodies.  In a Jacobi host at 10 ms, before the host's timing is
-    known, the FMU books that energy: it must be what the host's energy balance shows created
-    (measured 80-90 %: the formula is first order in the timing error)."""
+class _Unwithheld(ImpactResolver):
+    """The resolver without its first-impact pay-back (ImpactResolver._withhold): every impulse
+    handed over, so that the host shows the timing energy in full."""
+
+    def _withhold(self, emitted, internal, h):
+        return 0.0
+
+
+def _first_impact_in_a_jacobi_host(resolver):
+    """The two oscillators' first impact (0.17-0.25 s) and the settling after it in the exact
+    host in Jacobi order at 10 ms, nothing declared; returns (energy created [J], the most
+    timing energy booked [J], the most taken back [J], initial energy [J])."""
     case = hosts.two_oscillators()
-    ref = hosts.reference(case)
-    law = law_for("jankowski", 2.75e9, 1.5, 1e5, 1e5, 0.65)
     body = hosts.INTEGRATORS["zoh"](case.structure, case.x0, case.v0)
-    r = ImpactResolver(law)
+    r = resolver
     h, E0, damping, held = 0.01, body.energy(), 0.0, 0.0
-    booked = created = 0.0
+    booked = repaid = 0.0
     C = case.structure.C
-    for k in range(40):                   # the first impact, 0.17-0.25 s, and the settling after it
+    for k in range(40):
         F = r.step(body.x[0] - body.x[1] - 0.01, body.v[0] - body.v[1], h).mean_force
         v0 = body.v.copy()
         body.advance(h, np.array([-held, held]))
         held = F
         damping += 0.5 * h * (v0 @ C @ v0 + body.v @ C @ body.v)
-        booked = max(booked, r.observer.debt)
-    created = body.energy() + damping + r.dissipated_energy() - E0
-    assert r.impacts == 1 and not r.in_contact and ref.impacts == 5
-    assert created > 0.01 * E0           # the case the warning is for
+        booked, repaid = max(booked, r.observer.debt), max(repaid, r.observer.repaid)
+    assert r.impacts == 1 and not r.in_contact
+    return body.energy() + damping + r.dissipated_energy() - E0, booked, repaid, E0
+
+
+def test_the_timing_energy_is_what_the_host_gains():
+    """The argument of docs/fmi_hosts.md: over an impact the host gains int C A dt more than the
+    contact takes from its own bodies.  In a Jacobi host at 10 ms, before the host's timing is
+    known, the FMU books that energy: with every impulse handed over it must be what the host's
+    energy balance shows created (measured 80-90 %: the formula is first order in the timing
+    error)."""
+    law = law_for("jankowski", 2.75e9, 1.5, 1e5, 1e5, 0.65)
+    created, booked, _, E0 = _first_impact_in_a_jacobi_host(_Unwithheld(law))
+    assert created > 0.02 * E0           # the case the pay-back is for (3.9 % of E0)
     assert booked == pytest.approx(created, rel=0.25)
+
+
+def test_the_first_impact_takes_the_timing_energy_back():
+    """The same impact with the pay-back: the impulse withheld from the late host takes back
+    what the timing gave it (ImpactResolver._withhold), so that less than the issue's 1 % margin
+    is created: measured 0.045 % of E0 against 3.9 % without.  The energy the FMU claims to have
+    taken back is what the host shows (measured 0.88 of it; within 25 %, as the booking above)."""
+    law = law_for("jankowski", 2.75e9, 1.5, 1e5, 1e5, 0.65)
+    created_before, _, _, E0 = _first_impact_in_a_jacobi_host(_Unwithheld(law))
+    created, booked, repaid, _ = _first_impact_in_a_jacobi_host(ImpactResolver(law))
+    assert created < 0.01 * E0
+    assert repaid == pytest.approx(created_before - created, rel=0.25)
 
 
 class _Contact:
