@@ -18,9 +18,14 @@
 are ``python -m cosim`` and ``python -m cosim.cli``.
 
 Exit codes, the same for every command (:func:`exit_code`): 0 success; 1 a run that failed
-(an FMU refused a step, or the stability guard stopped it); 2 bad input (scene, ``--set``,
-study, calibration target, a parameter an FMU refuses at initialisation, a missing file);
-130 interrupted.  Errors are one line on standard error, ``error: ...``.  Text given to
+(an FMU refused a step, the stability guard stopped it, the disk filled up while writing);
+2 bad input (scene, ``--set``, study, calibration target, a parameter an FMU refuses at
+initialisation, a missing or corrupt file, an output path the rule refuses, a run beyond its
+limits); 130 interrupted (Ctrl-C: "interrupted", nothing written).  Errors are one line on
+standard error, ``error: ...``, never a traceback.
+
+Output paths follow one rule (:mod:`cosim.files`): a new or empty folder, or one this package
+wrote before and only with ``--overwrite``; a default path that is taken is numbered.  Text given to
 ``--set`` is parsed here, once (:func:`cosim.master.scene.parse_override`); everything below
 this module takes typed values.
 """
@@ -41,24 +46,38 @@ class BadInput(Exception):
     """A problem with the command line's input found by the command line itself (exit 2)."""
 
 
+def _loaded(module: str, name: str) -> type | None:
+    """Class ``name`` of ``module`` if that module is already imported, else None."""
+    return getattr(sys.modules.get(module), name, None)
+
+
 def exit_code(exc: BaseException) -> int:
     """The exit code of a command that raised ``exc`` (the one mapping of the package)."""
-    from .apps.calibrate import CalibrationError
-    from .apps.study import ClusterLost, StudyError
+    from .files import OutputError, WriteError
     from .master import FMUError, InstabilityError, SceneError
-    from .peers.ssp import NotExpressibleError
+    from .master.fmi import FMULoadError
+
+    # the applications' own errors, if their module was loaded at all (an exception cannot come
+    # from a module that never ran; importing the study application would load Dask, ~1 s)
+    app_errors = tuple(cls for cls in (_loaded("cosim.apps.calibrate", "CalibrationError"),
+                                       _loaded("cosim.apps.study.spec", "StudyError"),
+                                       _loaded("cosim.peers.ssp", "NotExpressibleError")) if cls is not None)
 
     if isinstance(exc, KeyboardInterrupt):
         return EXIT_INTERRUPTED
+    if isinstance(exc, WriteError):          # the work was done, the disk could not take it
+        return EXIT_FAILED
+    if isinstance(exc, (OutputError, FMULoadError)):
+        return EXIT_BAD_INPUT
     if isinstance(exc, FMUError):
         # parameters and records are checked at initialisation: that is bad input too
         return EXIT_FAILED if exc.function == "fmi2DoStep" else EXIT_BAD_INPUT
     if isinstance(exc, InstabilityError):   # the run went unphysical: nothing was written
         return EXIT_FAILED
-    if isinstance(exc, ClusterLost):   # a study's scheduler (or every able worker) went away: rows kept
-        return EXIT_FAILED
-    if isinstance(exc, (BadInput, SceneError, StudyError, CalibrationError, NotExpressibleError,
-                        FileNotFoundError, FileExistsError)):
+    cluster_lost = _loaded("cosim.apps.study.cluster", "ClusterLost")
+    if cluster_lost is not None and isinstance(exc, cluster_lost):
+        return EXIT_FAILED   # a study's scheduler (or every able worker) went away: rows kept
+    if isinstance(exc, (BadInput, SceneError, FileNotFoundError, FileExistsError) + app_errors):
         return EXIT_BAD_INPUT
     raise exc
 
@@ -86,9 +105,10 @@ def cmd_run(args) -> int:
         return cmd_accuracy(args)
     from .master import format_summary, run_scene
 
-    run = run_scene(args.scene, _overrides(args.overrides), out=args.out, coupling=args.coupling, step=args.step,
-                    stop_time=args.stop_time, fmu_dir=args.fmu_dir, plots=not args.no_plots,
-                    progress=False if args.no_progress else None, parquet=args.parquet,
+    run = run_scene(args.scene, _overrides(args.overrides), out=args.out, overwrite=args.overwrite,
+                    coupling=args.coupling, step=args.step, stop_time=args.stop_time, fmu_dir=args.fmu_dir,
+                    plots=not args.no_plots, progress=False if args.no_progress else None,
+                    max_steps=args.max_steps, parquet=args.parquet,
                     energy_limit=args.energy_limit, creation_limit=args.creation_limit)
     print(format_summary(run.summary))
     print(f"results: {run.folder}")
@@ -123,7 +143,7 @@ def cmd_accuracy(args) -> int:
 
     t0 = time.perf_counter()
     study, folder = study_and_write(args.scene, args.out, _overrides(args.overrides), fmu_dir=args.fmu_dir,
-                                    stop_time=args.stop_time)
+                                    stop_time=args.stop_time, overwrite=args.overwrite)
     print(markdown(study))
     print(f"written: {folder} (study wall time {time.perf_counter() - t0:.0f} s)")
     return EXIT_OK
@@ -149,10 +169,14 @@ def cmd_spectrum(args) -> int:
 
 def cmd_separation(args) -> int:
     from .apps.separation_scene import format_separations, scene_separations, write_separations
+    from .files import output_target
     from .master import Catalog, load_scene
 
     overrides = _overrides(args.overrides)
     name = load_scene(args.scene, overrides).name
+    default = args.out is None
+    out = output_target(Path("out") / f"{name}_separation" if default else args.out, overwrite=args.overwrite,
+                        default=default)   # refused before the runs, not after them
     with Catalog(_fmu_dir(args.fmu_dir)) as catalog:
         try:
             rows = scene_separations(args.scene, overrides, args.records, args.pga, check=not args.no_check,
@@ -160,8 +184,7 @@ def cmd_separation(args) -> int:
         except ValueError as exc:   # SceneError, a record that cannot be read: the input's fault
             raise BadInput(str(exc)) from None
     print(format_separations(rows))
-    folder = write_separations(rows, args.out if args.out is not None else Path("out") / f"{name}_separation",
-                               plots=not args.no_plots)
+    folder = write_separations(rows, out, plots=not args.no_plots, overwrite=args.overwrite, default=default)
     print(f"results: {folder}")
     failed = [r for r in rows if r.check is not None and not r.check.passed]
     if failed:
@@ -176,7 +199,8 @@ def cmd_export_ssp(args) -> int:
 
     overrides = _overrides(args.overrides) + settings(args.coupling, args.step, args.stop_time)
     try:
-        out, notes, scene = export(args.scene, args.file, overrides, fmu_dir=_fmu_dir(args.fmu_dir))
+        out, notes, scene = export(args.scene, args.file, overrides, fmu_dir=_fmu_dir(args.fmu_dir),
+                                   overwrite=args.overwrite)
     except ValueError as exc:   # a scene or system SSP cannot hold (names, values): the input's fault
         raise BadInput(str(exc)) from None
     for note in notes:
@@ -244,21 +268,31 @@ def cmd_study_compare(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from .apps.calibrate import CalibrationError, calibrate, calibrate_stiffness, write_outputs
+    import contextlib
 
-    if args.peak_force is not None:
-        if args.k is not None:
-            raise CalibrationError("give either --k (calibrate zeta) or --peak-force (calibrate k), not both")
-        res = calibrate_stiffness(args.model, args.peak_force, args.cr, m1=args.m1, m2=args.m2, v_imp=args.v_imp,
-                                  n=args.n, fmu=not args.no_fmu, fmu_dir=args.fmu_dir)
-    else:
-        if args.k is None:
-            raise CalibrationError("--k is required (contact stiffness in N/m^n), or --peak-force to calibrate it")
-        res = calibrate(args.model, args.cr, m1=args.m1, m2=args.m2, k=args.k, v_imp=args.v_imp, n=args.n,
-                        fmu=not args.no_fmu, zeta_bounds=tuple(args.zeta_bounds), fmu_dir=args.fmu_dir)
+    from .apps.calibrate import CalibrationError, calibrate, calibrate_stiffness, write_into
+    from .files import output_target, written_folder
+
+    if args.peak_force is not None and args.k is not None:
+        raise CalibrationError("give either --k (calibrate zeta) or --peak-force (calibrate k), not both")
+    if args.peak_force is None and args.k is None:
+        raise CalibrationError("--k is required (contact stiffness in N/m^n), or --peak-force to calibrate it")
+    claim = contextlib.nullcontext()
+    if args.out is not None:   # claimed before the calibration runs: a refused path is known at once
+        claim = written_folder(output_target(args.out, overwrite=args.overwrite), "calibration",
+                               overwrite=args.overwrite)
+    with claim as pending:
+        if args.peak_force is not None:
+            res = calibrate_stiffness(args.model, args.peak_force, args.cr, m1=args.m1, m2=args.m2,
+                                      v_imp=args.v_imp, n=args.n, fmu=not args.no_fmu, fmu_dir=args.fmu_dir)
+        else:
+            res = calibrate(args.model, args.cr, m1=args.m1, m2=args.m2, k=args.k, v_imp=args.v_imp, n=args.n,
+                            fmu=not args.no_fmu, zeta_bounds=tuple(args.zeta_bounds), fmu_dir=args.fmu_dir)
+        if pending is not None:
+            write_into(res, pending.path, plots=not args.no_plots)
     print(res.summary())
-    if args.out is not None:
-        print(f"results: {write_outputs(res, args.out, plots=not args.no_plots)}")
+    if pending is not None:
+        print(f"results: {pending.target}")
     return EXIT_OK
 
 
@@ -266,7 +300,7 @@ def cmd_report(args) -> int:
     from .apps.report import build_report
 
     t0 = time.perf_counter()
-    folder = build_report(args.out, quick=args.quick, fmu_dir=args.fmu_dir, jobs=args.jobs)
+    folder = build_report(args.out, quick=args.quick, fmu_dir=args.fmu_dir, jobs=args.jobs, overwrite=args.overwrite)
     print(f"report: {folder / 'report.md'} ({time.perf_counter() - t0:.0f} s)")
     return EXIT_OK
 
@@ -337,11 +371,18 @@ def _scene_options(p: argparse.ArgumentParser, run: bool = True) -> None:
                                                 "keeps them: build/fmus in a checkout, else a per-user cache)")
 
 
+def _overwrite_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the results of an earlier run of this package in --out (a folder holding "
+                        "anything else is never replaced)")
+
+
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     """The parser and its subcommands' parsers (by name)."""
     from .apps.study.spec import MAX_CASES as STUDY_MAX_CASES
     from .fmus import FMU_NAMES
     from .master.results import ENERGY_CREATION_LIMIT, ENERGY_RESIDUAL_LIMIT
+    from .master.limits import DEFAULT_MAX_STEPS
     from .master.runner import DEFAULT_SCENE
     from .peers.opensees import MATERIALS
 
@@ -362,7 +403,12 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("scene", nargs="?", default=DEFAULT_SCENE,
                    help="scene file or bundled scene name (default: %(default)s)")
     _scene_options(p)
-    p.add_argument("--out", type=Path, help="result folder (default: out/<scene name>)")
+    p.add_argument("--out", type=Path, help="result folder: new or empty (default: out/<scene name>, numbered "
+                                            "-2, -3, ... when taken)")
+    _overwrite_option(p)
+    p.add_argument("--max-steps", type=int, default=DEFAULT_MAX_STEPS, metavar="N",
+                   help="largest number of communication steps a run may take, planned or refined "
+                        "(default %(default)s); raise it on purpose for a longer run")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--parquet", action="store_true",
                    help="also write history.parquet (units and descriptions in the column metadata)")
@@ -388,7 +434,9 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                    help="override an FMU parameter (repeatable)")
     p.add_argument("--stop-time", type=float, help="end time in s (default: the scene's)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
-    p.add_argument("--out", type=Path, help="result folder (default: out/<scene>_accuracy)")
+    p.add_argument("--out", type=Path, help="result folder: new or empty (default: out/<scene>_accuracy, numbered "
+                                            "when taken)")
+    _overwrite_option(p)
 
     from fmu_src.ground_records import FORMATS, UNITS
     from fmu_src.response_spectrum import DEFAULT_DAMPING
@@ -423,13 +471,16 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                         "with co-simulation runs (any building)")
     p.add_argument("--no-check", action="store_true", help="skip the co-simulation runs at 0.99 and 1.01 times the gap")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
-    p.add_argument("--out", type=Path, help="result folder (default: out/<scene>_separation)")
+    p.add_argument("--out", type=Path, help="result folder: new or empty (default: out/<scene>_separation, numbered "
+                                            "when taken)")
+    _overwrite_option(p)
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plot")
 
     p = add("export-ssp", cmd_export_ssp, "write a scene as an SSP 1.0 package (FMUs included)")
     p.add_argument("scene", help="scene file or bundled scene name")
     p.add_argument("file", type=Path, metavar="FILE.ssp")
     _scene_options(p)
+    p.add_argument("--overwrite", action="store_true", help="replace FILE.ssp if it exists (never a folder)")
 
     p = add("study", cmd_study_run, "run a parameter study on Dask (`study plot ...` plots its results)",
             formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -493,11 +544,15 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                    help=f"search interval of the damping constant (default 0 {ZETA_MAX:g})")
     p.add_argument("--no-fmu", action="store_true", help="physics level only (no co-simulation)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
-    p.add_argument("--out", type=Path, help="write calibration.json, loop.png, force_time.png here")
+    p.add_argument("--out", type=Path, help="write calibration.json, loop.png, force_time.png into this new or "
+                                            "empty folder")
+    _overwrite_option(p)
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
 
     p = add("report", cmd_report, "regenerate the reproduction report of the seed paper")
-    p.add_argument("--out", type=Path, default=Path("docs/reproduction"), help="report folder (replaced)")
+    p.add_argument("--out", type=Path, default=Path("docs/reproduction"),
+                   help="report folder: new, empty, or an earlier report's with --overwrite (default %(default)s)")
+    _overwrite_option(p)
     p.add_argument("--quick", action="store_true", help="reduced grids and shortened records (tests)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
     p.add_argument("--jobs", type=int, default=2, help="processes for the earthquake runs (default %(default)s)")
@@ -539,8 +594,17 @@ def main(argv: Sequence[str] | None = None, prog: str | None = None) -> int:
     if getattr(args, "handler", None) is None:
         parser.print_help()
         return EXIT_BAD_INPUT
+    import warnings
+
+    from .master.fmi import deferred_interrupts
+
+    # numpy's overflow/invalid-value warnings from inside the FMUs and the master are not for the
+    # user: every result is checked (FMUs refuse non-finite states, the stability guard stops
+    # the run) and the one line that explains it is the error message
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
     try:
-        return args.handler(args)
+        with deferred_interrupts():   # Ctrl-C never lands inside an FMU's own code (see there)
+            return args.handler(args)
     except BaseException as exc:   # noqa: BLE001 - mapped to an exit code or re-raised
         if isinstance(exc, SystemExit):
             raise

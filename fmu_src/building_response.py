@@ -51,8 +51,8 @@ from scipy.optimize import brentq
 
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from .linear_response import (Configuration, ModalSegment, Scan, first_root, hermite_range_scalar,
-                                     max_abs)
+from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, first_root,
+                              hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -64,6 +64,14 @@ PEAK_ATOL = (1e-12, 1e-12, 1e-9)   # |x| (m), |drift| (m), |a| (m/s^2)
 MAX_PENDING = 256           # deferred peak searches kept before they are run anyway
 MAX_EVENTS_PER_STEP = 10000  # a bound on yield/unloading events in one communication step
 MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
+# Bouc-Wen's work per communication step.  The span: the same bound as the exact integrator's
+# quadrature (MAX_CHUNKS chunks of CHUNK_RATE / |lambda|), |lambda| h <= 8192, about 1300 periods
+# of the fastest elastic mode; a longer step (h = 1e6 s ran for minutes) is refused before any
+# work.  The Runge-Kutta steps: 1.6-15 per period of the fastest mode measured (1, 3 and 10
+# storeys, bw_n 2 and 20, steps of 0.01-100 s), so the longest allowed span needs about 20,000;
+# more means the integration is stuck on a stiff yield corner, not progressing.
+BOUC_WEN_MAX_SPAN = CHUNK_RATE * MAX_CHUNKS     # |lambda|_max h, dimensionless
+BOUC_WEN_MAX_RK_STEPS = 20_000                  # per communication step
 _ROOT_BUDGET = 200          # evaluations per root search (bisection depth ~ 2^-100 of the segment)
 
 
@@ -768,6 +776,12 @@ class BoucWenRK(BuildingIntegrator):
         force = np.asarray(force, dtype=float)
         cost = StepCost()
         n = self.n
+        h = float(times[-1] - times[0])
+        rate = float(np.max(self.building.omegas))   # the elastic modes are the fastest: yielding softens
+        if rate * h > BOUC_WEN_MAX_SPAN:
+            raise ValueError(f"a step of {h:.6g} s spans {rate * h:.6g} radians of the fastest mode "
+                             f"({rate:.6g} rad/s); the limit is {BOUC_WEN_MAX_SPAN:g} (about "
+                             f"{BOUC_WEN_MAX_SPAN / (2.0 * math.pi):.0f} periods): use shorter steps")
         u_start = state.u.copy()
         y = np.concatenate([state.u, state.v, state.z, [0.0, 0.0, 0.0]])
         peaks = state.peaks.copy()
@@ -784,6 +798,11 @@ class BoucWenRK(BuildingIntegrator):
             while solver.status == "running":
                 solver.step()
                 cost.rk_steps += 1
+                if cost.rk_steps > BOUC_WEN_MAX_RK_STEPS:
+                    raise ValueError(f"more than {BOUC_WEN_MAX_RK_STEPS} Runge-Kutta steps in one step of {h:.6g} s "
+                                     f"(the last {solver.step_size:.3g} s long): the Bouc-Wen storeys are too "
+                                     f"stiff at their yield corners (bw_n = {self.bw[0]:g}); use shorter steps "
+                                     f"or a smaller bw_n")
                 if solver.status == "failed":
                     raise ValueError(f"Bouc-Wen integration failed: {solver.message}")
                 y_new, f_new = solver.y, solver.f

@@ -33,6 +33,7 @@ E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kineti
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -45,6 +46,14 @@ from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64
+# Parameter bounds: generous beyond any building (a storey of the tallest tower is ~1e7 kg and
+# 1e10 N/m, periods stay below 10 s), and tight enough that the eigenproblem and the matrix
+# exponential stay in double precision: m = 1e-300 kg made LAPACK fail, m = 1e300 kg and
+# T1 = 1e300 s (stiffnesses scaled to 0) overflowed or underflowed the matrices.
+M_MIN, M_MAX = 1e-6, 1e12       # kg
+K_MAX = 1e15                    # N/m
+T1_MAX = 100.0                  # s
+X0_MAX, V0_MAX = 1e3, 1e3       # m, m/s
 # Default storey stiffness: 1e5 kg * (2 pi / 0.5 s)^2, i.e. the default 1-storey building has T1 = 0.5 s.
 _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 # Knots must start and end at the step's ends to this fraction of the step (hosts pass the same
@@ -63,17 +72,19 @@ class Building(Fmi2Slave):
     VARIABLES = (
         Variable("n_storeys", "Integer", start=1, low=1, high=N_MAX,
                  description=f"number of storeys used (capacity {N_MAX})"),
-        *array("m", N_MAX, start=1e5, unit="kg", low=0.0, low_open=True, description="floor mass"),
-        *array("k", N_MAX, start=_K_DEFAULT, unit="N/m", low=0.0,
+        *array("m", N_MAX, start=1e5, unit="kg", low=M_MIN, high=M_MAX, description="floor mass"),
+        *array("k", N_MAX, start=_K_DEFAULT, unit="N/m", low=0.0, high=K_MAX,
                description="storey stiffness between floor i-1 and i (scaled if T1 > 0)"),
-        Variable("T1", start=0.0, unit="s", low=0.0,
+        Variable("T1", start=0.0, unit="s", low=0.0, high=T1_MAX,
                  description="fundamental period the stiffnesses are scaled to; 0 = use k as given"),
         Variable("zeta", start=0.05, low=0.0, high=1.0, high_open=True, description="viscous damping ratio"),
         Variable("damping", "String", start="rayleigh", choices=DAMPING_MODELS,
                  description="damping model: rayleigh (modes 1 and 2) or modal (every mode), "
                              "on the initial stiffness"),
-        *array("x0", N_MAX, start=0.0, unit="m", description="initial floor displacement relative to the ground"),
-        *array("v0", N_MAX, start=0.0, unit="m/s", description="initial floor velocity relative to the ground"),
+        *array("x0", N_MAX, start=0.0, unit="m", low=-X0_MAX, high=X0_MAX,
+               description="initial floor displacement relative to the ground"),
+        *array("v0", N_MAX, start=0.0, unit="m/s", low=-V0_MAX, high=V0_MAX,
+               description="initial floor velocity relative to the ground"),
         Variable("hysteresis", "String", start="linear", choices=HYSTERESIS_MODELS,
                  description="storey law: linear, bilinear (kinematic hardening) or bouc_wen"),
         *array("Fy", N_MAX, start=0.0, unit="N", low=0.0,
@@ -247,15 +258,23 @@ class Building(Fmi2Slave):
         Everything a step needs is one matrix-vector product and three dot products.
         """
         b, n = self._building, self._n
-        prop = ZohPropagator(b, h)
-        S = prop.step_matrix                       # [u1; v1] = S y
-        Su = S[:n]
-        accel = self._R @ S
-        accel[:, 2 * n + 1:] += np.diag(1.0 / b.masses)
-        D = np.eye(n) - np.eye(n, k=-1)            # drift = D u
-        du = Su - np.eye(n, 3 * n + 1)
-        G = np.vstack([S, accel, D @ Su, du, b.masses @ du, prop.damping_form,
-                       np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflow is refused below, in one message
+            prop = ZohPropagator(b, h)
+            S = prop.step_matrix                       # [u1; v1] = S y
+            Su = S[:n]
+            accel = self._R @ S
+            accel[:, 2 * n + 1:] += np.diag(1.0 / b.masses)
+            D = np.eye(n) - np.eye(n, k=-1)            # drift = D u
+            du = Su - np.eye(n, 3 * n + 1)
+            G = np.vstack([S, accel, D @ Su, du, b.masses @ du, prop.damping_form,
+                           np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
+        if not np.isfinite(G).all():
+            # the block exponential (and Van Loan's damping integral, which grows like
+            # exp(2 zeta w h)) overflows: no step of this length can be computed
+            fastest = float(np.max(b.omegas))
+            raise SlaveError(f"a step of h = {h!r} s is beyond what the building's arithmetic supports (its step "
+                             f"matrix overflows; fastest mode {fastest:.3g} rad/s, zeta = {b.damping_ratio:g}); "
+                             f"use a shorter step")
         peaks = None if self._free_mass else self._integrator.legacy_rows(h)
         if len(self._steps) >= _MAX_CACHED_STEPS:
             self._steps.pop(next(iter(self._steps)))
@@ -288,10 +307,20 @@ class Building(Fmi2Slave):
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
                                  "ag held over the step (n_knots = 0)")
             times, values = knots
+        state = self._state
+        # what to restore if the step is refused: the integrators replace the state's fields,
+        # never change them in place, except the list of deferred peak searches
+        before = copy.copy(state)
+        before.pending = list(state.pending)
         try:
-            cost = self._integrator.advance(self._state, times, values, f)
+            cost = self._integrator.advance(state, times, values, f)
         except ValueError as exc:
-            raise SlaveError(str(exc)) from None
+            self._state = before
+            raise SlaveError(f"{exc} (nothing was changed)") from None
+        if not math.isfinite(float(state.u.sum()) + float(state.v.sum())):
+            self._state = before
+            raise SlaveError(f"a step of h = {step_size!r} s would leave the building's state not finite: the "
+                             f"inputs or the step are beyond what its arithmetic supports (nothing was changed)")
         self._count(cost)
         self._publish(f)
 
@@ -326,12 +355,25 @@ class Building(Fmi2Slave):
         y[2 * n] = ag
         y[2 * n + 1:] = f
         w = G @ y
+        i = 4 * n
+        j = i + n + 1
+        k = j + 3 * n + 1
+        d_external = float(f @ w[i:i + n])
+        d_input = -ag * float(w[i + n])
+        d_damping = float(y @ w[j:k])
+        kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
+        strain = 0.5 * float(w[k + n:] @ w[k + n:])
+        # a non-finite displacement or velocity makes one of these non-finite (each is a sum of
+        # squares or products of them): refuse before anything changes
+        if not math.isfinite(kinetic + strain + d_damping + d_input + d_external):
+            raise SlaveError(f"a step of h = {step_size!r} s with ag = {ag!r} m/s2 would leave the building's "
+                             f"state not finite: the inputs or the step are beyond what its arithmetic supports "
+                             f"(nothing was changed)")
         if peaks is None:
             self._free_mass_peaks(ag, f[0], step_size)
         else:
             start, scan, change = peaks
             self._integrator.legacy_peaks(state, y, start @ y, scan, change, step_size, self.cost)
-        i = 4 * n
         state.u = w[:n]           # views of the fresh product: nothing else writes to w
         state.v = w[n:2 * n]
         self.x[:n] = w[:n]
@@ -339,17 +381,18 @@ class Building(Fmi2Slave):
         self.a[:n] = w[2 * n:3 * n]
         self.drift[:n] = w[3 * n:i]
         self.base_shear = float(self._building.stiffnesses[0] * w[0])
-        state.E_external += float(f @ w[i:i + n])
-        state.E_input -= ag * float(w[i + n])
-        j = i + n + 1
-        k = j + 3 * n + 1
-        state.E_damping += float(y @ w[j:k])
+        state.E_external += d_external
+        state.E_input += d_input
+        state.E_damping += d_damping
         self.E_external = state.E_external
         self.E_input = state.E_input
         self.E_damping = state.E_damping
-        self.E_kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
-        self.E_strain = 0.5 * float(w[k + n:] @ w[k + n:])
+        self.E_kinetic = kinetic
+        self.E_strain = strain
         self._derived_cache = None
+
+    def _step_outputs_problem(self) -> str | None:
+        return None   # step() refuses a non-finite state before committing it (both paths)
 
     def _free_mass_peaks(self, ag: float, force: float, h: float) -> None:
         """In-step peaks of a free mass: u(s) = u0 + v0 s + acc s^2 / 2 with acc = F/m - ag."""

@@ -5,18 +5,29 @@ and implements two hooks: :meth:`SlaveBase.initialize` (after the parameters
 are checked) and :meth:`SlaveBase.step` (one communication step).  This base
 class does the FMI bookkeeping that pythonfmu leaves to the author:
 
-* parameter checks against the declared ranges, reported as an FMI error
-  message that names the variable, its value and the allowed range;
-* finite-input checks on every step;
-* no Python exception ever escapes ``do_step``: pythonfmu would turn it into
-  ``fmi2Fatal`` and free the instance.  pythonfmu 0.7 can only return
-  ``fmi2OK``, ``fmi2Discard`` (``do_step`` returning ``False``) or
-  ``fmi2Fatal``; a failed step therefore returns ``fmi2Discard`` with a
-  message logged under status ``fmi2Error`` (category ``logStatusError``),
-  and the instance stays alive so the host can read the message;
+* parameter checks, declared as data: the ranges of each :class:`Variable` (``low``/``high``,
+  ``choices``) and the cross-parameter rules of :meth:`SlaveBase.validate`, run at
+  ``fmi2ExitInitializationMode`` (the earliest point FMI allows);
+* refusals the host sees (pythonfmu 0.7 can only return ``fmi2OK``, ``fmi2Discard`` (``do_step``
+  returning ``False``) or ``fmi2Fatal`` (a Python exception escaping); ``fmi2Error`` is not
+  reachable from Python):
+
+  - bad parameters at ``fmi2ExitInitializationMode``, a parameter set after initialisation, a
+    state freed twice or used after it was freed: the call raises, which pythonfmu returns as
+    ``fmi2Fatal`` and logs, with status ``fmi2Fatal``, as "Fatal py exception encountered:
+    [<call>] ..." followed by ``SlaveError('<one line naming the variable, value and allowed
+    range>')``.  The instance may still be freed or reset (:meth:`SlaveBase._refuse` keeps
+    pythonfmu's reference counts straight);
+  - a step the model cannot take (a non-finite input, a bad step size, a state that would not
+    be finite): ``fmi2Discard`` with the message logged as ``fmi2Error``, nothing changed;
+    the instance stays alive so the host can read the message;
+  - an instance refused at initialisation refuses every step with the same message;
+
 * FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``) includes the private
   attributes listed in ``PRIVATE_STATE``, deep-copied, so that a restored
-  instance continues exactly as the saved one;
+  instance continues exactly as the saved one.  A state freed twice by the host, or used
+  after it was freed, is refused at the next state call instead of corrupting the process
+  (:class:`_SavedStates`);
 * the modelDescription gets units, ``UnitDefinitions``, min/max, and every output is
   ``initial="calculated"`` (computed when initialisation ends) and listed in
   ``ModelStructure/InitialUnknowns``, which pythonfmu alone leaves out; its description
@@ -28,7 +39,9 @@ shares one Python interpreter.
 from __future__ import annotations
 
 import copy
+import ctypes
 import math
+import operator
 import sys
 import traceback
 from dataclasses import dataclass
@@ -153,6 +166,62 @@ class SlaveError(Exception):
     """An error that a slave reports through FMI status and the log."""
 
 
+class _SavedState(dict):
+    """One saved FMU state (the attributes, deep-copied): a dict, as pythonfmu expects."""
+
+    __slots__ = ("__weakref__",)
+
+
+class _SavedStates:
+    """The FMU states an instance handed out, kept so that a host's mistakes are refused.
+
+    pythonfmu 0.7's ``fmi2FreeFMUstate`` releases the state's Python object (``Py_XDECREF``)
+    without calling Python and without clearing the host's handle: a state freed twice would
+    release an object already gone (heap corruption), and a state used after it was freed would
+    read freed memory.  So each state handed out carries one extra reference held here
+    (``Py_IncRef``), besides the list entry: the object outlives the host's frees, and its
+    reference count says how many the host made.  At every state call (:meth:`check`) a state
+    the host freed once is let go; one freed twice is let go too (its count repaired) and the
+    call is refused, naming the mistake.  ``fmi2SetFMUstate`` with a freed state is refused
+    the same way.
+    """
+
+    def __init__(self):
+        self.states: list[_SavedState] = []
+
+    def add(self, state: _SavedState) -> _SavedState:
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(state))
+        self.states.append(state)
+        return state
+
+    def holds(self, state: Any) -> bool:
+        """True if ``state`` is a state of this instance that the host has not freed (after :meth:`check`)."""
+        return any(s is state for s in self.states)
+
+    def check(self, passed: Any = None) -> str | None:
+        """Let go of the states the host freed; a message if one was freed more than once.
+        ``passed``: the state the current FMI call passes in (fmi2SetFMUstate), which the call
+        itself references three times more (pythonfmu's argument tuple, the call's arguments and
+        the method's parameter; measured on CPython 3.11, and tested: a live state is accepted,
+        a freed one refused)."""
+        problem = None
+        keep = []
+        for state in self.states:
+            # references besides the host's: the list entry, the extra one, the loop variable and
+            # getrefcount's argument (CPython, which pythonfmu embeds)
+            host = sys.getrefcount(state) - 4 - (3 if state is passed else 0)
+            if host >= 1:
+                keep.append(state)
+                continue
+            if host < 0:   # freed twice: give back what the second free took, then let go
+                for _ in range(-host):
+                    ctypes.pythonapi.Py_IncRef(ctypes.py_object(state))
+                problem = "the host freed an FMU state twice (fmi2FreeFMUstate); a state may be freed only once"
+            ctypes.pythonapi.Py_DecRef(ctypes.py_object(state))   # the extra reference
+        self.states = keep
+        return problem
+
+
 class SlaveBase(Fmi2Slave):
     """Base of every FMU slave of the package (see module docstring)."""
 
@@ -171,8 +240,13 @@ class SlaveBase(Fmi2Slave):
         self.default_experiment = DefaultExperiment(start_time=start, stop_time=stop, step_size=step)
         self._error: str | None = None
         self._t_next: float | None = None   # s, where the next step must start (None: anywhere)
+        self._initialized = False            # True after fmi2ExitInitializationMode succeeded
+        self._saved = _SavedStates()
+        # pythonfmu looks _set_fmu_state up on the instance: the checks run first (see there)
+        self._set_fmu_state = self._checked_set_state
         # (variable, attribute, index) triples, resolved once: do_step runs thousands of times
         self._real_inputs: list[tuple[Variable, str, int | None]] = []
+        self._real_outputs: list[tuple[Variable, str, int | None]] = []
         self._checked: list[tuple[Variable, str, int | None]] = []
         arrays: dict[str, int] = {}
         for var in self.VARIABLES:
@@ -186,9 +260,16 @@ class SlaveBase(Fmi2Slave):
             slot = (var, var.attribute, var.index)
             if var.causality == "input" and var.type == "Real":
                 self._real_inputs.append(slot)
+            if var.causality == "output" and var.type == "Real":
+                self._real_outputs.append(slot)
             if var.causality == "parameter" and (var.low is not None or var.high is not None
                                                   or var.choices is not None or var.type == "Real"):
                 self._checked.append(slot)
+        # the scalar Real outputs in one C call, the arrays whole (a Python loop over the outputs
+        # cost 3.5 us per step on pounding.fmu, a third of its doStep)
+        scalars = [a for _, a, i in self._real_outputs if i is None]
+        self._scalar_outputs = operator.attrgetter(*scalars) if len(scalars) > 1 else None
+        self._array_outputs = sorted({a for _, a, i in self._real_outputs if i is not None})
 
     # -- declaration ---------------------------------------------------------------------------
     def _register(self, var: Variable) -> None:
@@ -209,6 +290,8 @@ class SlaveBase(Fmi2Slave):
             getattr(self, attr)[idx] = var.start
             getter = self._element_getter(attr, idx)
             setter = self._element_setter(attr, idx)
+        if var.causality == "parameter":
+            setter = self._parameter_setter(var, setter)
         self.register_variable(
             cls(var.name, causality=causality, variability=variability, initial=initial,
                 description=self._describe(var), getter=getter, setter=setter,
@@ -228,6 +311,20 @@ class SlaveBase(Fmi2Slave):
         def set_element(value: Any) -> None:
             getattr(self, attr)[idx] = value
         return set_element
+
+    def _parameter_setter(self, var: Variable, setter: Callable[[Any], None] | None) -> Callable[[Any], None]:
+        """The setter of a parameter: refused once the instance is initialised (every parameter is
+        ``fixed``: FMI 2.0 allows setting it only before fmi2ExitInitializationMode)."""
+        attr = var.attribute
+        set_value = setter or (lambda value: setattr(self, attr, value))
+
+        def set_parameter(value: Any) -> None:
+            if self._initialized:
+                self._refuse(f"{self.instance_name}: {var.name} is a fixed parameter: it cannot change after "
+                             f"initialisation (fmi2ExitInitializationMode); the value {value!r} was not applied "
+                             f"(set it before, or fmi2Reset the instance)", disable=False)
+            set_value(value)
+        return set_parameter
 
     @staticmethod
     def _describe(var: Variable) -> str:
@@ -280,6 +377,28 @@ class SlaveBase(Fmi2Slave):
         """Advance one communication step; raise SlaveError to refuse it."""
         raise NotImplementedError
 
+    def _outputs_problem(self) -> str | None:
+        """Why the outputs cannot be trusted (one is not finite), or None.  Run after every step
+        and at the end of initialisation; a subclass that checks its new state before committing
+        it (and so can refuse a step with nothing changed) may replace it with a cheaper check."""
+        # the fast path: a sum is finite if every term is (a finite sum that overflows only sends
+        # it to the exact check below)
+        total = sum(self._scalar_outputs(self)) if self._scalar_outputs is not None else 0.0
+        for attr in self._array_outputs:
+            total += float(np.sum(getattr(self, attr)))
+        if math.isfinite(total):
+            return None
+        for var, attr, idx in self._real_outputs:
+            value = getattr(self, attr) if idx is None else getattr(self, attr)[idx]
+            if not math.isfinite(value):
+                return f"output {var.name} = {float(value)!r} is not finite"
+        return None
+
+    def _step_outputs_problem(self) -> str | None:
+        """:meth:`_outputs_problem` after a step (a subclass that refuses a non-finite state
+        before committing it returns None here)."""
+        return self._outputs_problem()
+
     # -- FMI entry points ------------------------------------------------------------------------
     def exit_initialization_mode(self):
         problems = []
@@ -295,14 +414,45 @@ class SlaveBase(Fmi2Slave):
                 problems.append(f"parameter check failed: {exc!r}")
         self._t_next = None
         if problems:
-            self._fail(f"{self.instance_name}: invalid parameters: " + "; ".join(problems))
-            return
+            self._refuse(f"{self.instance_name}: invalid parameters: " + "; ".join(problems))
         try:
             self.initialize()
         except SlaveError as exc:
-            self._fail(f"{self.instance_name}: {exc}")
+            self._refuse(f"{self.instance_name}: {exc}")
         except Exception as exc:
-            self._fail(f"{self.instance_name}: initialisation failed: {exc!r}\n{traceback.format_exc(limit=3)}")
+            self._refuse(f"{self.instance_name}: initialisation failed: {exc!r}\n{traceback.format_exc(limit=3)}")
+        problem = self._outputs_problem()
+        if problem:
+            self._refuse(f"{self.instance_name}: after initialisation {problem}: the parameters are beyond what "
+                         f"the model's arithmetic supports")
+        self._initialized = True
+
+    def _refuse(self, message: str, disable: bool = True) -> None:
+        """Refuse the current FMI call with ``message``: raise, which pythonfmu 0.7 returns as
+        fmi2Fatal (the only failure status a Python exception can give there) and logs, with
+        status fmi2Fatal, as "Fatal py exception encountered: [<call>] ...\\nSlaveError('<message>')".
+        ``disable``: the instance also refuses every later step with the message.
+
+        The message travels in the exception, not as a log message of its own: pythonfmu reads
+        the exception only after it has forwarded the queued log messages, and forwarding them
+        loses the exception (it then logs "unknown error"), which is all libcosim shows.  So any
+        message still queued is folded into this one and the queue emptied.
+
+        pythonfmu 0.7 (PySlaveInstance.cpp, ``handle_py_exception``) releases its references to
+        this instance, its class and its log queue when an exception escapes, and releases them
+        again when the host frees or resets the instance (``cleanPyObject``, ``initialize``):
+        without one more reference to each, freeing the refused instance would free objects
+        twice and corrupt the heap.  Each refusal therefore hands one of each back.
+        """
+        queued = [getattr(m, "msg", "") for m in self.log_queue]
+        self.log_queue.clear()
+        if queued:
+            message = f"{message} (logged before: {'; '.join(str(q) for q in queued)})"
+        if disable:
+            self._error = message
+        for obj in (self, type(self), self.log_queue):
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+        raise SlaveError(message)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         if self._error is not None:
@@ -327,6 +477,12 @@ class SlaveBase(Fmi2Slave):
             self.log(f"{self.instance_name}: t = {current_time:.9g} s: internal error {exc!r}\n"
                      f"{traceback.format_exc(limit=4)}", Fmi2Status.error)
             return False
+        problem = self._step_outputs_problem()
+        if problem:   # the state has changed and is not usable: every later step is refused too
+            self._error = (f"{self.instance_name}: t = {current_time:.9g} s: the step of h = {step_size!r} s left "
+                           f"{problem}: the model cannot take this step (restore a saved state, or reset)")
+            self.log(self._error, Fmi2Status.error)
+            return False
         self._t_next = current_time + step_size
         return True
 
@@ -349,17 +505,30 @@ class SlaveBase(Fmi2Slave):
                         f"allowed: t = {self._t_next:.17g} s")
         return None
 
-    def _fail(self, message: str) -> None:
-        self._error = message
-        self.log(message, Fmi2Status.error)
-
     # -- FMU state -------------------------------------------------------------------------------
     def _get_fmu_state(self) -> dict[str, Any]:
-        state = {}
+        problem = self._saved.check()
+        if problem:
+            self._refuse(f"{self.instance_name}: {problem}", disable=False)
+        state = _SavedState()
         for attr in {v.attribute for v in self.VARIABLES} | set(self.PRIVATE_STATE) | {"_error", "_t_next"}:
             state[attr] = copy.deepcopy(getattr(self, attr))
-        return state
+        return self._saved.add(state)
+
+    def _checked_set_state(self, state: dict[str, Any]) -> None:
+        """What pythonfmu calls for fmi2SetFMUstate (an instance attribute named ``_set_fmu_state``,
+        set in ``__init__``, so that the call always reaches this frame first, at the depth
+        :meth:`_SavedStates.check` counts with, whatever a subclass overrides): refuse a state
+        freed or foreign, then restore it (:meth:`_set_fmu_state`)."""
+        problem = self._saved.check(passed=state)
+        if problem:
+            self._refuse(f"{self.instance_name}: {problem}", disable=False)
+        if not self._saved.holds(state):
+            self._refuse(f"{self.instance_name}: fmi2SetFMUstate with a state that was freed (fmi2FreeFMUstate) "
+                         f"or was not saved by this instance", disable=False)
+        type(self)._set_fmu_state(self, state)
 
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        """Restore a saved state (a subclass may extend it; the checks are in :meth:`_checked_set_state`)."""
         for attr, value in state.items():
             setattr(self, attr, copy.deepcopy(value))

@@ -8,6 +8,7 @@ import math
 import pytest
 
 from cosim.apps.accuracy import CRITERIA, REDUCED_FAMILIES, Row, markdown, run_study, score, write_study
+from cosim.files import MARKER
 from cosim.master.system import Catalog
 
 
@@ -80,7 +81,7 @@ def test_score_applies_the_criteria():
 
 def test_written_files(study, tmp_path):
     folder = write_study(study, tmp_path / "acc")
-    assert {p.name for p in folder.iterdir()} == {"accuracy.csv", "accuracy.md", "accuracy.png"}
+    assert {p.name for p in folder.iterdir()} == {"accuracy.csv", "accuracy.md", "accuracy.png", MARKER}
     with open(folder / "accuracy.csv") as fh:
         table = list(csv.DictReader(fh))
     assert len(table) == len(study.rows)

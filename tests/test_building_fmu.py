@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
-from fmpy.fmi1 import calloc, free
+from fmpy.fmi1 import FMICallException, calloc, free
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.validation import validate_fmu
@@ -32,7 +32,11 @@ class Slave:
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.enterInitializationMode()
         self.set(**params)
-        self.fmu.exitInitializationMode()
+        self.refused = None   # the exception of a refused fmi2ExitInitializationMode (fmi2Fatal)
+        try:
+            self.fmu.exitInitializationMode()
+        except FMICallException as exc:
+            self.refused = exc
         self.t = 0.0
 
     def _log(self, env, instance, status, category, message):
@@ -170,7 +174,9 @@ def test_state_save_restore_is_identical(building_fmu):
 
 
 @pytest.mark.parametrize("params, fragment", [
-    ({"m[1]": -5.0}, "m[1] = -5.0 kg is outside the allowed range 0 < m[1]"),
+    ({"m[1]": -5.0}, "m[1] = -5.0 kg is outside the allowed range 1e-06 <= m[1] <= 1e+12"),
+    ({"m[1]": 1e300}, "m[1] = 1e+300 kg is outside the allowed range 1e-06 <= m[1] <= 1e+12"),
+    ({"T1": 1e300}, "T1 = 1e+300 s is outside the allowed range 0 <= T1 <= 100"),
     ({"n_storeys": 0}, "n_storeys = 0 is outside the allowed range 1 <= n_storeys <= 20"),
     ({"n_storeys": 21}, "n_storeys = 21 is outside the allowed range 1 <= n_storeys <= 20"),
     ({"n_storeys": 2, "k[2]": 0.0}, "k[2] = 0"),
@@ -180,8 +186,11 @@ def test_state_save_restore_is_identical(building_fmu):
 ])
 def test_bad_parameters_give_an_error_naming_the_variable(building_fmu, params, fragment):
     s = Slave(building_fmu, "bad", **params)
+    # refused at fmi2ExitInitializationMode, the earliest point FMI allows: pythonfmu can only
+    # answer fmi2Fatal there, and logs the slave's message in its wrapper of the exception
+    assert s.refused is not None and s.refused.status == 4
     assert any(fragment in m for m in s.messages), s.messages
-    with pytest.raises(Exception):  # the instance refuses to step (fmi2Discard)
+    with pytest.raises(Exception):  # a refused instance refuses every step too (fmi2Discard)
         s.step(0.01)
     s.close()
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.files import MARKER, OutputError
 from cosim.master import output
 from cosim.master.scene import SCENES
 from cosim.cli import main as cli_main
@@ -36,7 +37,7 @@ def test_readme_first_command_runs_the_default_scene(capsys, tmp_path, fmu_dir):
     assert stdout.startswith("scene default:") and "peak displacement" in stdout and f"results: {out}" in stdout
     assert {p.name for p in out.iterdir()} == {"history.csv", "history_units.csv", "impacts.csv", "summary.json",
                                                "displacements.png", "energy.png", "contact_force.png",
-                                               "hysteresis.png"}
+                                               "hysteresis.png", MARKER}
     summary = json.loads((out / "summary.json").read_text())
     for key in ("peak_force_N", "impacts", "dissipated_energy_J", "wall_time_s", "communication_steps",
                 "fmu_calls", "rollbacks", "energy_input_J", "energy_residual_J", "energy_residual_relative"):
@@ -127,8 +128,10 @@ def test_results_folder_is_complete_or_absent(tmp_path, fmu_dir, monkeypatch):
     monkeypatch.undo()
     output.write_results(run.result, out, plots=False)
     first = (out / "summary.json").read_text()
-    # rewriting replaces the folder as a whole
-    output.write_results(run.result, out, plots=False)
+    # an earlier run's folder is replaced only on request, and then as a whole
+    with pytest.raises(OutputError, match="--overwrite"):
+        output.write_results(run.result, out, plots=False)
+    output.write_results(run.result, out, plots=False, overwrite=True)
     assert (out / "summary.json").read_text() == first
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r"]
 

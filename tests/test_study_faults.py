@@ -191,20 +191,43 @@ def test_an_unbounded_study_is_refused_at_once(tmp_path, fmu_dir, capsys):
 
 
 # -- Ctrl-C ------------------------------------------------------------------------------------------
+def as_a_terminal_starts_it(argv: list[str]) -> list[str]:
+    """``argv`` run with SIGINT at its default disposition, as a terminal's foreground job has it.
+
+    A test runner started in the background by a script (``pytest ... &``: the shell makes such
+    jobs ignore SIGINT) would pass the ignored SIGINT on to the study (an ignored signal stays
+    ignored across ``exec``), which then rightly ignores a Ctrl-C: exit 0 after every case.
+    """
+    reset = "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); os.execv(sys.argv[1], sys.argv[1:])"
+    return [sys.executable, "-c", reset, *argv]
+
+
 def test_ctrl_c_ends_the_study_with_130_and_keeps_the_rows(tmp_path, fmu_dir, processes, client):
     """SIGINT to the study's whole process group (the local cluster's workers included, as a
     terminal's Ctrl-C): one line "interrupted...", exit 130, no traceback from the study or its
-    workers, the rows written kept, no process of the group left; --resume completes it."""
+    workers, the rows written kept and no row written after the one in progress, no process of
+    the group left; --resume completes it."""
     study = write(tmp_path / "slow.toml", SLOW)
-    out = tmp_path / "out"
-    p = start(command(study, out, fmu_dir, "--workers", "2"), tmp_path, processes)
-    wait_for(lambda: rows_in(out / "results.csv") >= 3, "3 rows", p)
-    os.killpg(p.pid, signal.SIGINT)
-    stdout, err = p.communicate(timeout=TIMEOUT_S)
-    assert p.returncode == 130, err
+    for attempt in range(3):
+        out = tmp_path / f"out{attempt}"
+        p = start(as_a_terminal_starts_it(command(study, out, fmu_dir, "--workers", "2")), tmp_path, processes)
+        wait_for(lambda out=out: rows_in(out / "results.csv") >= 3, "3 rows", p)
+        os.killpg(p.pid, signal.SIGINT)
+        at_signal = rows_in(out / "results.csv")   # the signal is pending in the study once killpg returns
+        stdout, err = p.communicate(timeout=TIMEOUT_S)
+        if at_signal < 16:
+            break
+        # every case had finished before the signal (a loaded machine held this process back
+        # while the study ran 13 cases): it may end either way, and says nothing about Ctrl-C
+        assert p.returncode in (0, 130), (stdout, err)
+    else:
+        pytest.fail("the study finished every case before the signal, 3 times")
+    assert p.returncode == 130, (at_signal, stdout, err)
     assert err.strip() == "interrupted: the finished cases are in the results; complete them with --resume"
     _, rows = read_results(out / "results.csv")
-    assert 3 <= len(rows) < 16 and len({r["case_id"] for r in rows}) == len(rows)
+    # the study's main thread writes the rows one at a time: at most the row being written when
+    # the signal came is added after it
+    assert 3 <= len(rows) <= at_signal + 1 and len({r["case_id"] for r in rows}) == len(rows)
     assert not (out / "study.lock").exists() and (out / "results.parquet").exists()
 
     def group_gone() -> bool:
@@ -231,13 +254,20 @@ def test_ctrl_c_while_the_fmus_validate_the_study_waits_for_them(tmp_path, catal
     study = load_study(write(tmp_path / "slow.toml", SLOW))
     timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
     validated = []
-    with pytest.raises(KeyboardInterrupt):
-        with ctrl_c_deferred():
-            timer.start()
-            validated.append(validate_study(study, catalog))   # 16 values on the FMUs: longer than 0.05 s
-            timer.join()   # the signal has arrived inside the block
-    assert validated == [["left", "right"]]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
+    # A pytest started as a background job inherits SIGINT ignored, and ctrl_c_deferred rightly
+    # leaves an ignored SIGINT ignored: give this process a terminal's default for the test.
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with ctrl_c_deferred():
+                timer.start()
+                validated.append(validate_study(study, catalog))   # 16 values on the FMUs: longer than 0.05 s
+                timer.join()   # the signal has arrived inside the block
+        assert validated == [["left", "right"]]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, inherited)
 
 
 # -- --retry-failed ----------------------------------------------------------------------------------

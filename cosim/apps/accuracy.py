@@ -48,7 +48,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..files import replaced_folder
+from ..files import output_target, written_folder
 from ..fmus import default_fmu_dir
 from ..master.coupling import STRATEGIES
 from ..master.guard import InstabilityError
@@ -455,21 +455,36 @@ def plot(study: Study, path: Path) -> None:
     plt.close(fig)
 
 
-def write_study(study: Study, folder: str | Path) -> Path:
-    """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` in ``folder`` (written complete)."""
-    with replaced_folder(folder) as tmp:
-        write_csv(study, tmp / "accuracy.csv")
-        (tmp / "accuracy.md").write_text(markdown(study))
-        plot(study, tmp / "accuracy.png")
-    return Path(folder)
+def _write_into(study: Study, folder: Path) -> None:
+    write_csv(study, folder / "accuracy.csv")
+    (folder / "accuracy.md").write_text(markdown(study))
+    plot(study, folder / "accuracy.png")
+
+
+def write_study(study: Study, folder: str | Path, *, overwrite: bool = False) -> Path:
+    """``accuracy.csv``, ``accuracy.md``, ``accuracy.png`` in ``folder``, by the output rule
+    (:mod:`cosim.files`: an earlier study's folder is replaced only with ``overwrite``), complete
+    or not at all.  Returns the folder."""
+    target = output_target(folder, overwrite=overwrite)
+    with written_folder(target, "accuracy", overwrite=overwrite) as pending:
+        _write_into(study, pending.path)
+    return pending.target
 
 
 def study_and_write(scene: str, out: str | Path | None, overrides: Sequence[Override | str] = (), fmu_dir=None,
-                    stop_time: float | None = None, log: Callable[[str], None] | None = print) -> tuple[Study, Path]:
-    """Run the study of ``scene`` and write it into ``out`` (default ``out/<scene>_accuracy``)."""
-    study = run_study(scene, fmu_dir=fmu_dir, overrides=overrides, stop_time=stop_time, log=log)
-    folder = write_study(study, Path(out) if out else Path("out") / f"{study.scene}_accuracy")
-    return study, folder
+                    stop_time: float | None = None, log: Callable[[str], None] | None = print,
+                    overwrite: bool = False) -> tuple[Study, Path]:
+    """Run the study of ``scene`` and write it into ``out`` (default ``out/<scene>_accuracy``,
+    numbered when taken).  The scene is checked and the folder claimed by the output rule before
+    the study starts (minutes), so that bad input or an unwritable path is known at once."""
+    name = load_scene(scene, list(overrides) + settings(stop_time=stop_time)).name
+    default = out is None
+    target = output_target(Path("out") / f"{name}_accuracy" if default else Path(out), overwrite=overwrite,
+                           default=default)
+    with written_folder(target, "accuracy", overwrite=overwrite, default=default) as pending:
+        study = run_study(scene, fmu_dir=fmu_dir, overrides=overrides, stop_time=stop_time, log=log)
+        _write_into(study, pending.path)
+    return study, pending.target
 
 
 def _check_families() -> None:

@@ -45,7 +45,7 @@ from scipy.optimize import brentq
 from fmu_src.contact_laws import DAMPED_MODELS, MODELS, ContactLaw, effective_mass, law_spec, published_zeta
 from fmu_src.single_impact import calibrate_zeta, goldsmith_loss, simulate_impact
 
-from ..files import replaced_folder
+from ..files import output_target, written_folder
 from ..fmus import default_fmu_dir
 from ..master.results import Cost
 from ..master.runner import run_scene
@@ -649,10 +649,19 @@ def plot_calibration(res: CalibrationResult | StiffnessCalibration, out: Path) -
     return paths
 
 
-def write_outputs(res: CalibrationResult | StiffnessCalibration, out: str | Path, plots: bool = True) -> Path:
-    """Write ``calibration.json`` (and the plots) into ``out``, complete or not at all."""
-    with replaced_folder(out) as tmp:
-        (tmp / "calibration.json").write_text(json.dumps(res.to_dict(), indent=2) + "\n")
-        if plots:
-            plot_calibration(res, tmp)
-    return Path(out)
+def write_into(res: CalibrationResult | StiffnessCalibration, folder: Path, plots: bool = True) -> None:
+    """Write ``calibration.json`` (and the plots) into the claimed, empty ``folder``."""
+    (folder / "calibration.json").write_text(json.dumps(res.to_dict(), indent=2) + "\n")
+    if plots:
+        plot_calibration(res, folder)
+
+
+def write_outputs(res: CalibrationResult | StiffnessCalibration, out: str | Path, plots: bool = True, *,
+                  overwrite: bool = False) -> Path:
+    """Write ``calibration.json`` (and the plots) into ``out`` by the output rule
+    (:mod:`cosim.files`: an earlier calibration's folder is replaced only with ``overwrite``),
+    complete or not at all.  Returns the folder."""
+    target = output_target(out, overwrite=overwrite)
+    with written_folder(target, "calibration", overwrite=overwrite) as pending:
+        write_into(res, pending.path, plots)
+    return pending.target

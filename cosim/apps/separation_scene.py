@@ -31,7 +31,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..files import replaced_folder
+from ..files import output_target, written_folder
 from ..master.loader import load_scene
 from ..master.names import column, element_name
 from ..master.scene import Override, Scene, SceneError
@@ -390,11 +390,16 @@ def plot_separations(rows: Sequence[LevelSeparation], path: Path) -> Path:
     return path
 
 
-def write_separations(rows: Sequence[LevelSeparation], folder: str | Path, plots: bool = True) -> Path:
-    """``separation.csv`` (and ``separation.png``) into ``folder``, complete or not at all."""
-    with replaced_folder(folder) as tmp:
-        (tmp / "separation.csv").write_text(separation_csv(rows), encoding="utf-8")
-        (tmp / "separation.txt").write_text(format_separations(rows) + "\n", encoding="utf-8")
+def write_separations(rows: Sequence[LevelSeparation], folder: str | Path, plots: bool = True, *,
+                      overwrite: bool = False, default: bool = False) -> Path:
+    """``separation.csv``, ``separation.txt`` (and ``separation.png``) into ``folder`` by the output
+    rule (:func:`cosim.files.output_target`: a new or empty folder, or this package's own with
+    ``overwrite``; ``default``: the program chose the path, numbered when taken), complete or not
+    at all.  Returns the folder written."""
+    target = output_target(folder, overwrite=overwrite, default=default)
+    with written_folder(target, "separation", overwrite=overwrite, default=default) as pending:
+        (pending.path / "separation.csv").write_text(separation_csv(rows), encoding="utf-8")
+        (pending.path / "separation.txt").write_text(format_separations(rows) + "\n", encoding="utf-8")
         if plots:
-            plot_separations(rows, tmp / "separation.png")
-    return Path(folder)
+            plot_separations(rows, pending.path / "separation.png")
+    return pending.target

@@ -17,6 +17,20 @@ Two pythonfmu facts shape this module:
   problem with status ``fmi2Error`` and return ``fmi2OK``.  :meth:`Instance.call`
   therefore also fails a call during which the instance logged an error.
 
+* pythonfmu 0.7 turns a Python exception in a slave's ``exit_initialization_mode`` or a setter
+  into ``fmi2Fatal`` with the exception's repr logged ("Fatal py exception encountered:
+  [exitInitializationMode] ...\\nSlaveError('left: invalid parameters: ...')"); the package's
+  slaves refuse bad parameters that way, and :class:`FMUError` reports the slave's own line
+  (:func:`slave_message`), not pythonfmu's wrapper.
+
+Ctrl-C (:func:`deferred_interrupts`): pythonfmu slaves run Python code in this interpreter, so a
+KeyboardInterrupt raised while a slave's code runs would escape it and become ``fmi2Fatal``
+("Fatal py exception encountered: [getReal]").  While :func:`deferred_interrupts` is active,
+SIGINT is held while an FMU's code runs and raised by the master right after the FMI call
+returns (:func:`raise_pending_interrupt`), as a plain KeyboardInterrupt.
+
+A corrupt or unreadable FMU file is :class:`FMULoadError`, naming the file.
+
 Performance: fmpy's convenience methods (``getReal([...])``) allocate ctypes
 arrays on every call.  The hot loop instead uses ports with value references
 and a numpy buffer prepared once (``RealPort``), so one ``fmi2GetReal`` costs
@@ -25,12 +39,18 @@ the slave's Python ``do_step`` dominating the rest.
 """
 from __future__ import annotations
 
+import ast
 import atexit
+import contextlib
 import itertools
 import os
+import re
 import shutil
+import signal
 import sys
+import threading
 import weakref
+import zipfile
 from collections import deque
 from ctypes import POINTER, byref, c_char_p, c_double, c_int, c_uint
 from dataclasses import dataclass
@@ -95,6 +115,57 @@ def _remove_extracted() -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
+# -- Ctrl-C ----------------------------------------------------------------------------------------
+#: SIGINTs held while an FMU's code ran (process-wide by nature: signals are); see deferred_interrupts
+_PENDING_INTERRUPT = [0]
+#: code that runs inside an FMU call: the FMUs' own packages (cosim.fmus.PACKAGE_PREFIX), pythonfmu's
+#: slave base, the package's physics (when a slave runs in-process), and the log callback below
+_FMU_CODE = ("pounding_cosim_", "pythonfmu", "fmu_src")
+
+
+def _inside_fmu(frame) -> bool:
+    """True if the Python stack ending in ``frame`` runs an FMU's code (called from its C side)."""
+    while frame is not None:
+        name = frame.f_globals.get("__name__", "")
+        if name.startswith(_FMU_CODE) or frame.f_code is _dispatch_log.__code__:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _on_sigint(signum, frame) -> None:
+    if _inside_fmu(frame):
+        _PENDING_INTERRUPT[0] += 1      # raised by the master when the FMI call returns
+        return
+    _PENDING_INTERRUPT[0] = 0
+    raise KeyboardInterrupt
+
+
+def raise_pending_interrupt() -> None:
+    """Raise KeyboardInterrupt if a Ctrl-C arrived while an FMU's code ran (see
+    :func:`deferred_interrupts`); called after FMI calls and before results are written."""
+    if _PENDING_INTERRUPT[0]:
+        _PENDING_INTERRUPT[0] = 0
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def deferred_interrupts():
+    """Within the block, Ctrl-C never interrupts an FMU's own code: it is held until the FMI call
+    returns and then raised in the master as KeyboardInterrupt.  Only in the main thread (where
+    Python delivers signals); elsewhere a no-op.  The command line wraps every command in it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        yield
+        raise_pending_interrupt()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        _PENDING_INTERRUPT[0] = 0
+
+
 def libraries_loaded() -> bool:
     """True once an FMU's shared library has been loaded into this process."""
     return bool(_LOADED)
@@ -122,6 +193,32 @@ def exit_process(code: int | None) -> NoReturn:
     os._exit(0 if code is None else code if isinstance(code, int) else 1)   # as SystemExit reads it
 
 
+#: how pythonfmu 0.7 begins the log line of a Python exception it turned into fmi2Fatal
+PYTHONFMU_FATAL = "Fatal py exception encountered"
+
+
+def slave_message(text: str) -> str:
+    """The slave's own message in a log line: pythonfmu's fatal wrapper
+    ("Fatal py exception encountered: [call] ...\\nSlaveError('msg')") unwrapped to ``msg``; any
+    other text as it is."""
+    if not text.startswith(PYTHONFMU_FATAL):
+        return text
+    for line in text.splitlines()[1:]:
+        match = re.fullmatch(r"\s*\w+\((.*)\)\s*", line)
+        if match:
+            try:
+                value = ast.literal_eval(match.group(1))
+            except (ValueError, SyntaxError):
+                continue
+            if isinstance(value, str) and value:
+                return value
+    return text
+
+
+class FMULoadError(RuntimeError):
+    """An FMU file cannot be read (corrupt, not an FMU, not co-simulation); names the file."""
+
+
 class FMUError(RuntimeError):
     """An FMI call failed.
 
@@ -137,10 +234,15 @@ class FMUError(RuntimeError):
         self.status = status
         self.messages = list(messages)
         label = STATUS[status] if 0 <= status < len(STATUS) else f"illegal status {status}"
-        if self.messages:
-            first = self.messages[-1].strip().splitlines()[0]
+        # a slave's refusal reaches us inside pythonfmu's wrapper of its exception: unwrapped
+        own = [slave_message(m) for m in self.messages if m.strip()]
+        plain = [m for m in own if not m.startswith(PYTHONFMU_FATAL)]
+        if plain:
+            first = plain[-1].strip().splitlines()[0]
             # the slaves already prefix their messages with the instance name
             text = first if first.startswith(f"{instance}:") else f"{instance}: {first}"
+        elif own:   # pythonfmu's wrapper of an exception it could not read: its last line
+            text = f"{instance}: {function} returned fmi2{label}: {own[-1].strip().splitlines()[-1]}"
         else:
             text = f"{instance}: {function} returned fmi2{label}"
         super().__init__(text)
@@ -219,11 +321,18 @@ class FMU:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self.interface = read_interface(self.path)
+        try:
+            self.interface = read_interface(self.path)
+            self.unzip_dir: Path | None = _extract_once(self.path)
+        except FileNotFoundError:
+            raise
+        except Exception as exc:   # BadZipFile, a missing modelDescription, bad XML, not co-simulation
+            why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise FMULoadError(f"{self.path} is not a usable FMU ({type(exc).__name__}: {why}); rebuild it with "
+                               f"`pounding-cosim build-fmus --force --out {self.path.parent}`") from None
         self.model_description = self.interface.model_description
         self.name = self.path.stem
         self.variables: dict[str, VariableInfo] = self.interface.variables
-        self.unzip_dir: Path | None = _extract_once(self.path)
 
     def variable(self, name: str, causality: str | None = None) -> VariableInfo:
         """Look a variable up by name (and causality), with a helpful error."""
@@ -317,10 +426,13 @@ class Instance:
         return status
 
     def call(self, function: str, *args) -> int:
-        """Call the FMI function ``function`` with ``args`` and check the outcome."""
+        """Call the FMI function ``function`` with ``args`` and check the outcome (a Ctrl-C held
+        during the call is raised after it: :func:`deferred_interrupts`)."""
         before = self.errors_logged
         status = self.functions[function](*args)
         self.calls += 1
+        if _PENDING_INTERRUPT[0]:
+            raise_pending_interrupt()
         return self.check(function, status, before)
 
     # -- life cycle --------------------------------------------------------------------------
@@ -336,6 +448,8 @@ class Instance:
         status = self._do_step(self.component, t, h, 1)
         self.calls += 1
         self.do_steps += 1
+        if _PENDING_INTERRUPT[0]:   # one list read per step; the ports' calls are checked here too
+            raise_pending_interrupt()
         if status:
             self.check("fmi2DoStep", status)
 
@@ -365,10 +479,17 @@ class Instance:
         return state
 
     def set_state(self, state) -> None:
+        if not state:
+            raise FMUError(self.name, "fmi2SetFMUstate", FMI2_ERROR, [f"{self.name}: the FMU state was freed"])
         self.call("fmi2SetFMUstate", self.component, state)
 
     def free_state(self, state) -> None:
+        """fmi2FreeFMUstate, once: the handle is cleared afterwards (pythonfmu 0.7 does not clear it,
+        and a second free of the same state would release the state's Python object twice)."""
+        if not state:
+            return
         self.call("fmi2FreeFMUstate", self.component, byref(state))
+        state.value = None
 
     # -- variables -----------------------------------------------------------------------------
     def variable(self, name: str, causality: str | None = None) -> VariableInfo:

@@ -4,8 +4,10 @@
 strategy (hooked into :func:`cosim.master.simulate.simulate`) and raises
 :class:`InstabilityError` with what to change when a run has stopped meaning anything:
 non-finite outputs, a penetration deeper than all the energy in the system could compress
-the contact spring, energy created by the coupling, or a plain force-law contact stepped
-past a quarter of its impact time scale.
+the contact spring, energy created by the coupling, a plain force-law contact stepped
+past a quarter of its impact time scale, or work that explodes (refined communication steps
+or a contact FMU's internal steps far beyond what any resolved impact needs, or more steps
+than the run's limit).
 
 :func:`contact_levels` is how the master sees each contact instance (where its signals live
 in ``System.y`` and its contact law, from the contact law table); the adaptive strategy
@@ -31,12 +33,32 @@ if TYPE_CHECKING:
 # own floor on a latched impact speed.
 _V_FLOOR = MIN_IMPACT_SPEED
 
+#: Refined communication steps the master may take per impact (beyond the scene's own steps),
+#: with resolved impacts and with the plain force law.  Measured: resolved impacts need 1-3
+#: refinements each (default scene 12 for 11 impacts, Kobe 27 for 9); the plain law at 1/64 of
+#: the impact time scale 585 each (default scene, CR 0.65), and its step shrinks up to 16 times
+#: more as CR -> 1 (``_Level.in_contact_scale``): about 9400.  Far more than those (over 150
+#: times and twice) is not an impact being resolved but a contact whose time scale has
+#: collapsed (``pounding.zeta = 1e6``: a dashpot that holds the floors together took 137 000
+#: steps of 0.6 us in 2 ms).
+MAX_REFINED_STEPS_PER_IMPACT = {True: 500, False: 20_000}   # by resolve_impacts
+#: Internal steps a contact FMU may take after an impact's onset, beyond
+#: :data:`SUBSTEPS_PER_STEP` per communication step.  A resolved impact takes 40-90 internal
+#: steps on every bundled scene (at most 16 in one doStep, measured); 5000 is 55 times the
+#: most, an impact law whose in-step integration has become stiff or chatters (crvk at
+#: CR 0.001 chattered at 600-700 per doStep while the floors stuck together, for seconds, before the
+#: in-step resolver of issue 13; it now completes, and this bound stays the master's own protection).
+MAX_SUBSTEPS_PER_IMPACT = 5_000
+#: Internal steps per communication step a lasting contact may take without counting against
+#: :data:`MAX_SUBSTEPS_PER_IMPACT` (four times the most seen in one doStep on the bundled scenes).
+SUBSTEPS_PER_STEP = 64
+
 
 class InstabilityError(RuntimeError):
     """A run produced numbers that cannot be trusted; the message says what to change.
 
     Attributes: ``t`` (s), ``instance`` (contact or building name, or ``""``), ``reason``
-    (``"non-finite" | "penetration" | "energy"``).
+    (``"non-finite" | "penetration" | "energy" | "resolution" | "work"``).
     """
 
     def __init__(self, message: str, t: float, instance: str = "", reason: str = ""):
@@ -66,6 +88,10 @@ class _Level:
     i_vimp: int                 # contact output v_impact (m/s)
     i_Ediss: int                # contact output E_dissipated (J)
     CR: float = 0.65            # requested restitution
+    j_impacts: int = -1         # contact output impacts (index into System.ints; -1: none)
+    j_substeps: int = -1        # contact output substeps (index into System.ints; -1: none)
+    i_contact_time: int = -1    # contact output contact_time (s; -1: none)
+    i_zeta_used: int = -1       # contact output zeta_used (-1: none)
 
     def in_contact_scale(self, delta: float, delta_dot: float, v_imp: float, fraction: float) -> float:
         """Longest step (s) the explicit force-law coupling can take in contact now.
@@ -131,6 +157,7 @@ def contact_levels(system: "System") -> list[_Level]:
     scene's contact levels.
     """
     index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
+    ints = {c: j for j, c in enumerate(system.columns[system.y.size:])}
     where = {level.instance: level for level in system.scene.levels}
     levels = []
     for node in system.contacts:
@@ -143,7 +170,9 @@ def contact_levels(system: "System") -> list[_Level]:
         out = node.name + "."
         levels.append(_Level(node.name, law, float(p["gap"]), bool(p["resolve_impacts"]), x1, v1, a1, x2, v2, a2,
                              index[out + "delta"], index[out + "F"], index[out + "v_impact"],
-                             index[out + "E_dissipated"], float(p["CR"])))
+                             index[out + "E_dissipated"], float(p["CR"]), ints.get(out + "impacts", -1),
+                             ints.get(out + "substeps", -1), index.get(out + "contact_time", -1),
+                             index.get(out + "zeta_used", -1)))
     return levels
 
 
@@ -166,6 +195,13 @@ class StabilityGuard:
       ``max_step_over_time_scale`` times the impact time scale ``T`` (:meth:`_sampling`); the
       largest ratio seen is kept in :attr:`step_over_time_scale` for the run's summary.
 
+    * work that explodes (:meth:`_work`): more accepted communication steps than ``max_steps``;
+      more than :data:`MAX_REFINED_STEPS_PER_IMPACT` refined steps per impact beyond the scene's
+      own steps (``base_step``); a contact FMU's internal steps (its ``substeps`` output) since
+      its latest impact's onset beyond :data:`MAX_SUBSTEPS_PER_IMPACT` plus
+      :data:`SUBSTEPS_PER_STEP` per communication step.  The message names the contact and the
+      time scale that collapsed.
+
     ``energy_tol = 0.01``: a coupling that creates 1 % of the energy in the system has
     changed the response by more than any accuracy a user asks of a pounding study.
     """
@@ -173,8 +209,12 @@ class StabilityGuard:
     #: plain-law step / impact time scale beyond which a run stops (its energy error ~ the ratio)
     max_step_over_time_scale = 0.25
 
-    def __init__(self, system: "System", penetration_factor: float = 2.0, energy_tol: float = 0.01):
+    def __init__(self, system: "System", penetration_factor: float = 2.0, energy_tol: float = 0.01,
+                 max_steps: int | None = None, base_step: float | None = None):
         self.system = system
+        self.max_steps = max_steps
+        self.base_step = float(base_step) if base_step else system.scene.step
+        self.steps = 0                       # accepted communication steps checked so far
         self.penetration_factor = float(penetration_factor)
         self.energy_tol = float(energy_tol)
         self.levels = contact_levels(system)
@@ -194,6 +234,12 @@ class StabilityGuard:
         self._update_limits()
         #: largest communication step / impact time scale seen in contact, per plain-law contact
         self.step_over_time_scale = {lv.name: 0.0 for lv in self.levels if not lv.resolved}
+        # per contact: impacts seen, internal steps and communication steps since the latest onset,
+        # and when it began (s)
+        self._impacts = [0] * len(self.levels)
+        self._substeps = [0] * len(self.levels)
+        self._steps_since = [0] * len(self.levels)
+        self._onset = [0.0] * len(self.levels)
 
     def _update_limits(self) -> None:
         E = self.E_avail
@@ -206,6 +252,7 @@ class StabilityGuard:
 
     def problem(self, t: float, h: float) -> InstabilityError | None:
         """The first problem found after the step that ended at ``t`` (step ``h``), or None."""
+        self.steps += 1
         y = self.system.y
         if not math.isfinite(y.sum()):      # one reduction; a non-finite entry makes the sum non-finite
             bad = self.system.columns[int(np.flatnonzero(~np.isfinite(y))[0])] if not np.isfinite(y).all() \
@@ -254,7 +301,88 @@ class StabilityGuard:
             return InstabilityError(
                 f"t = {t:.6g} s: the buildings hold {mech:.3g} J, more than the {self.E_avail:.3g} J ever put "
                 f"in: {self._advice(lv, h)}", t, lv.name if lv else "", "energy")
+        return self._work(t, h)
+
+    # -- work ------------------------------------------------------------------------------------
+    def _work(self, t: float, h: float) -> InstabilityError | None:
+        """Work that explodes (see the class docstring), or None."""
+        if self.max_steps is not None and self.steps > self.max_steps:
+            return InstabilityError(
+                f"t = {t:.6g} s: the run has taken {self.steps:,} communication steps, more than the limit of "
+                f"{self.max_steps:,} (--max-steps; the scene plans {self.system.scene.stop_time / self.base_step:.3g} "
+                f"at step {self.base_step:g} s, the rest are refinements near impacts): raise --max-steps on "
+                f"purpose, or lengthen the step", t, "", "work")
+        ints = self.system.ints
+        total_impacts = 0
+        for i, lv in enumerate(self.levels):
+            if lv.j_impacts < 0:
+                continue
+            impacts = int(ints[lv.j_impacts])
+            total_impacts += impacts
+            if impacts != self._impacts[i]:       # a new impact began in this step
+                self._impacts[i] = impacts
+                self._substeps[i] = 0
+                self._steps_since[i] = 0
+                self._onset[i] = t
+            if lv.j_substeps < 0:
+                continue
+            self._substeps[i] += int(ints[lv.j_substeps])
+            self._steps_since[i] += 1
+            allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * self._steps_since[i]
+            if self._substeps[i] > allowed:
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: the contact FMU has taken {self._substeps[i]:,} internal steps in "
+                    f"{self._steps_since[i]} communication steps since its impact at t = {self._onset[i]:.6g} s "
+                    f"(limit {MAX_SUBSTEPS_PER_IMPACT:,} + {SUBSTEPS_PER_STEP} per step; a resolved impact takes "
+                    f"40-90): {self._stuck(lv)}", t, lv.name, "work")
+        refined = self.steps - t / self.base_step
+        if self.levels:
+            per_impact = MAX_REFINED_STEPS_PER_IMPACT[all(lv.resolved for lv in self.levels)]
+            if refined > per_impact * (total_impacts + 1):
+                lv = max(self.levels, key=lambda lv: self.system.y.item(lv.i_delta))
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: the coupling has taken {refined:,.0f} refined communication steps "
+                    f"for {total_impacts} impact(s) (limit {per_impact:,} per impact), the last {h:.2g} s long: "
+                    f"{self._collapse(lv)}", t, lv.name, "work")
         return None
+
+    def _law_text(self, level: _Level) -> str:
+        y = self.system.y
+        zeta = y.item(level.i_zeta_used) if level.i_zeta_used >= 0 else level.law.zeta
+        return f"{level.law.model} at CR = {level.CR:g} (zeta = {zeta:.3g}, k = {level.law.k:.3g}, n = {level.law.n:g})"
+
+    def _stuck(self, level: _Level) -> str:
+        """What a contact whose in-step work exploded looks like, and what to change."""
+        y = self.system.y
+        delta, delta_dot, _ = level.kinematics(y)
+        v = max(level.approach_speed(y), _V_FLOOR)
+        T = level.time_scale(v)
+        held = y.item(level.i_contact_time) if level.i_contact_time >= 0 else float("nan")
+        return (f"{self._law_text(level)}: the floors have been in contact for {held:.3g} s, "
+                f"{held / T:.3g} impact time scales (T = {T:.2g} s at {v:.2g} m/s), closing at {delta_dot:.2g} m/s: "
+                f"the law holds them together and its in-step integration chatters; raise CR or lower zeta")
+
+    def _collapse(self, level: _Level) -> str:
+        """Which of the contact's time scales collapsed, in numbers, and what to change."""
+        law = level.law
+        y = self.system.y
+        delta, delta_dot, _ = level.kinematics(y)
+        v = max(level.approach_speed(y), _V_FLOOR)
+        impact = law.length_scale(v) / v
+        d = max(delta, 1e-3 * law.length_scale(v))
+        scales = {"the impact time scale L/v": impact}
+        k_t = law.n * law.k * d ** (law.n - 1.0)
+        if k_t > 0.0:
+            scales["the spring's sqrt(m/k_t)"] = math.sqrt(law.m / k_t)
+        c = law.force_and_derivatives(d, max(abs(delta_dot), _V_FLOOR), v)[2]
+        if c > 0.0 and math.isfinite(c):
+            scales["the dashpot's 8 m/c"] = 8.0 * law.m / c
+        name, shortest = min(scales.items(), key=lambda kv: kv[1])
+        text = f"{self._law_text(level)}: {name} = {shortest:.2g} s, against an impact time scale of {impact:.2g} s"
+        if name == "the dashpot's 8 m/c":
+            return (text + ": the damping holds the floors together and the coupling must follow it in steps this "
+                           "short; lower zeta, or raise CR (CR -> 0 makes the dashpot stiff)")
+        return text + ": check the contact's k, n and masses, or lengthen the step"
 
     def _sampling(self, level: _Level, t: float, h: float) -> InstabilityError | None:
         """Track ``h / T`` of a plain-law contact in contact, ``T = L / v`` the spring's impact

@@ -44,6 +44,9 @@ class VariableInfo:
     start: Any
     unit: str | None
     description: str | None
+    #: the closed bounds of a number (modelDescription ``min``/``max``), None when unbounded
+    min: float | None = None
+    max: float | None = None
     base: str = field(init=False, compare=False)
     index: int | None = field(init=False, compare=False)
 
@@ -98,6 +101,13 @@ def _typed(type_: str, value: Any) -> Any:
     return None if value is None else _CONVERT[type_](value)
 
 
+def _bound(text: Any) -> float | None:
+    try:
+        return None if text is None else float(text)
+    except ValueError:
+        return None
+
+
 def read_interface(path: str | Path) -> FmuInterface:
     """The interface of the FMU file ``path`` (its modelDescription.xml; read once per file version)."""
     path = Path(path)
@@ -115,7 +125,8 @@ def _read_interface(path: str, size: int, mtime_ns: int) -> FmuInterface:
     if md.coSimulation is None:
         raise ValueError(f"{path} is not a co-simulation FMU")
     variables = [VariableInfo(v.name, v.type, v.causality, v.variability, v.valueReference,
-                              _typed(v.type, v.start), v.unit, v.description) for v in md.modelVariables]
+                              _typed(v.type, v.start), v.unit, v.description, _bound(v.min), _bound(v.max))
+                 for v in md.modelVariables]
     return FmuInterface(Path(path).stem, variables, path, md)
 
 
@@ -127,8 +138,10 @@ def declared_interface(name: str) -> FmuInterface:
     variables = []
     for var in slave.VARIABLES:
         start = None if var.causality == "output" else _typed(var.type, var.start)
+        low = var.low if var.low is not None and not var.low_open else None      # as the modelDescription has them
+        high = var.high if var.high is not None and not var.high_open else None
         variables.append(VariableInfo(var.name, var.type, var.causality, var.resolved_variability, None, start,
-                                      var.unit or None, var.description))
+                                      var.unit or None, slave._describe(var), low, high))   # as the FMU writes it
     return FmuInterface(name, variables, f"fmu_src.{spec.module}.{spec.class_name}")
 
 

@@ -24,6 +24,7 @@ from fmu_src.ground_records import BUNDLED, SCALING_TARGETS, scaling_conflict
 from fmu_src.hysteresis import StoreyHysteresis
 from fmu_src.shear_building import ShearBuilding
 
+from ..files import plain_name_problem
 from ..fmus import BUILDING, GROUND, POUNDING
 from .coupling import COUPLINGS
 from .interface import FmuInterface, interfaces, parameter_defaults
@@ -112,7 +113,7 @@ class _Builder:
         override = (self.overridden.get((table, key)) or self.overridden.get((table, base_name(key)))
                     if key else None)
         if override:
-            return SceneError(f"--set {override}: {message}")
+            return SceneError(f"{override}: {message}")
         line = self._line_of(key, table) if key else None
         loc = f"{self.where}, line {line}" if line else self.where
         return SceneError(f"{loc}: {message}")
@@ -146,9 +147,19 @@ class _Builder:
         self._apply_contact_overrides(contact_overrides, ground, buildings, contacts)
         self._contact_defaults(levels, contacts, buildings)
         scene = Scene(name, description, stop_time, step, coupling, ground, buildings, contacts, levels,
-                      allow_overlap, self.path, dict(self.fmus), tuple(o.text for o in overrides))
+                      allow_overlap, self.path, dict(self.fmus), tuple(o.text for o in overrides),
+                      origins=self._origins())
         self._check_initial_gaps(scene)
         return scene
+
+    def _origins(self) -> dict[str, str]:
+        """Where each top-level setting came from: its ``--set`` (or ``--step``...), else the file line."""
+        out = {}
+        for key in SETTABLE:
+            override = self.overridden.get((None, key))
+            line = self._line_of(key, None) if override is None else None
+            out[key] = override or (f"{self.where}, line {line}" if line else self.where)
+        return out
 
     def _check_tables(self) -> None:
         """Top-level keys, at least one building, every table a table and every name usable."""
@@ -176,23 +187,25 @@ class _Builder:
         raw = self.raw
         later = []
         for o in overrides:
-            instance, variable, value, text = o.instance, o.variable, o.value, o.text
+            instance, variable, value, text = o.instance, o.variable, o.value, o.where
             # keyed by the table the errors name: top level, ground, buildings.<b>, pounding or a contact
             self.overridden[(f"buildings.{instance}" if instance in buildings_raw else instance, variable)] = text
             if instance is None:
                 if variable not in SETTABLE:
-                    raise SceneError(f"--set {text}: unknown top-level key {variable!r} "
+                    raise SceneError(f"{text}: unknown top-level key {variable!r} "
                                      f"(allowed: {', '.join(SETTABLE)})")
                 raw[variable] = value
             elif instance == "ground":
                 if "ground" not in raw:
-                    raise SceneError(f"--set {text}: {self.where} has no ground motion (no [ground] table)")
+                    raise SceneError(f"{text}: {self.where} has no ground motion (no [ground] table)")
                 raw["ground"][variable] = value
             elif instance in buildings_raw:
+                if not isinstance(buildings_raw[instance], dict):
+                    raise SceneError(f"{text}: buildings.{instance} is not a table in {self.where}")
                 buildings_raw[instance][variable] = value
             elif instance == "pounding":
                 if "pounding" not in raw or len(buildings_raw) < 2:
-                    raise SceneError(f"--set {text}: {self.where} has no contact instance "
+                    raise SceneError(f"{text}: {self.where} has no contact instance "
                                      f"(needs a [pounding] table and two buildings)")
                 raw["pounding"][variable] = value
             else:
@@ -204,8 +217,9 @@ class _Builder:
         raw = self.raw
         name = raw.get("name", self.path.stem if self.path else "scene")
         description = raw.get("description", "")
-        if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name):
-            raise self.error(f"name = {name!r} must be a word (letters, digits, _ . -): it names the output folder", "name")
+        problem = plain_name_problem(name)
+        if problem:
+            raise self.error(f"name = {problem}", "name")
         stop_time = self._positive(raw, "stop_time")
         step = self._positive(raw, "step")
         if step > stop_time:
@@ -253,15 +267,15 @@ class _Builder:
 
     def _apply_contact_overrides(self, overrides: list[tuple[Override, str]], ground, buildings, contacts) -> None:
         by_name = {c.name: c for c in contacts}
-        for o, text in overrides:
+        for o, text in overrides:   # text: where the override came from (o.where)
             if o.instance not in by_name:
                 names = [s.name for s in ([ground] if ground else []) + buildings + contacts]
                 if contacts:
                     names.insert(len(names) - len(contacts), "pounding")
-                raise SceneError(f"--set {text}: no instance {o.instance!r} in {self.where} "
+                raise SceneError(f"{text}: no instance {o.instance!r} in {self.where} "
                                  f"(instances: {', '.join(names)})")
             if o.variable in POUNDING_MASTER_KEYS:
-                raise SceneError(f"--set {text}: {o.variable} applies to every level; use pounding.{o.variable}")
+                raise SceneError(f"{text}: {o.variable} applies to every level; use pounding.{o.variable}")
             by_name[o.instance].parameters.update(self._flat_parameters({o.variable: o.value}, POUNDING, o.instance))
 
     def _contact_defaults(self, levels: list[ContactLevel], contacts: list[InstanceSpec],
@@ -313,7 +327,24 @@ class _Builder:
               "String": lambda v: isinstance(v, str)}[info.type](value)
         if not ok:
             raise self.error(f"{table}.{key} = {value!r} must be a {info.type}", key, table)
+        if info.type in ("Real", "Integer"):
+            self._check_range(info, fmu, table, key, value)
         return float(value) if info.type == "Real" else value
+
+    def _check_range(self, info, fmu: str, table: str, key: str, value: float) -> None:
+        """The FMU's declared closed bounds (its modelDescription's min/max): refused here, with
+        the file line or the --set, rather than by the FMU at initialisation."""
+        if not math.isfinite(value):
+            raise self.error(f"{table}.{key} = {value!r} is not a finite number", key, table)
+        low, high = info.min, info.max
+        if (low is not None and value < low) or (high is not None and value > high):
+            unit = f" {info.unit}" if info.unit and info.unit != "1" else ""
+            bounds = (f"{low:g} <= " if low is not None else "") + key + (f" <= {high:g}" if high is not None else "")
+            stated = (info.description or "").rpartition("; allowed: ")[2]   # the FMU's own words, open bounds too
+            if stated and "; allowed: " in (info.description or ""):
+                bounds = stated
+            raise self.error(f"{table}.{key} = {value!r}{unit} is outside the allowed range {bounds} ({fmu}.fmu)",
+                             key, table)
 
     def _flat_parameters(self, table: Mapping[str, Any], fmu: str, where: str) -> dict[str, Any]:
         out = {}
@@ -377,6 +408,9 @@ class _Builder:
                     raise self.error(f"{where}.{key} is not an array parameter (arrays: {', '.join(sorted(arrays))})",
                                      key, where)
                 if len(value) != n:
+                    if (where, "n_storeys") in self.overridden:   # the count came from a --set
+                        raise self.error(f"{where}.n_storeys = {n}, but {where}.{key} has {len(value)} values",
+                                         "n_storeys", where)
                     raise self.error(f"{where}.{key} has {len(value)} values for n_storeys = {n}", key, where)
                 for i, v in enumerate(value, 1):
                     flat[element_name(base, i)] = v
@@ -393,14 +427,27 @@ class _Builder:
         for i in range(1, n + 1):
             if element_name("m", i) not in flat:
                 raise self.error(f"{where}: missing mass m[{i}] (kg); give m = [...] with {n} values", "m", where)
+        # the physical rules first (their messages say why: a yielding storey needs Fy > 0 where
+        # the FMU declares only Fy >= 0), then the FMU's declared ranges
         for key in list(flat):
-            flat[key] = self._check_value(BUILDING, where, key, flat[key])
             self._check_storey(where, key, flat[key], n)
         self._check_storey_law(where, flat, n)
+        for key in list(flat):
+            flat[key] = self._check_value(BUILDING, where, key, flat[key])
         return flat
 
     def _storeys(self, where: str, table: Mapping[str, Any]) -> int:
-        """``n_storeys``: given, or the length of the lists / the highest element named."""
+        """``n_storeys``: given, or the length of the lists / the highest element named; at most
+        the building FMU's capacity (named, with where the value came from, when exceeded)."""
+        capacity = self._storey_capacity()
+        room = (f"{BUILDING}.fmu has room for 1 to {capacity} storeys (N_MAX = {capacity} in "
+                f"fmu_src/building_slave.py: raise it and rebuild the FMUs for a taller building)")
+        for key, value in table.items():
+            base, index = element(key)
+            if isinstance(value, list) and len(value) > capacity:
+                raise self.error(f"{where}.{key} has {len(value)} values: {room}", key, where)
+            if index is not None and index > capacity:
+                raise self.error(f"{where}.{key}: floor {index} is beyond the top floor: {room}", key, where)
         n = table.get("n_storeys")
         if n is None:
             lengths = [len(v) for v in table.values() if isinstance(v, list)]
@@ -408,7 +455,15 @@ class _Builder:
             n = max(lengths + indices + [1])
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
             raise self.error(f"{where}.n_storeys = {n!r} must be an integer >= 1", "n_storeys", where)
+        if n > capacity:
+            raise self.error(f"{where}.n_storeys = {n!r}: {room}", "n_storeys", where)
         return n
+
+    def _storey_capacity(self) -> int:
+        """How many storeys the building FMU has variables for (its ``m[i]`` parameters)."""
+        interface = self.fmus[BUILDING]
+        return max((v.index for v in interface.variables.values()
+                    if v.base == "m" and v.index is not None and v.causality == "parameter"), default=1)
 
     def _check_storey(self, where: str, key: str, value: Any, n: int) -> None:
         base, index = element(key)

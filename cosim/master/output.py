@@ -1,7 +1,10 @@
 """Writing a run's results: ``history.csv``, ``summary.json``, PNG plots, and the terminal summary.
 
-Folders are written completely under a temporary sibling name and renamed at the end
-(:func:`cosim.files.replaced_folder`): a folder under its final name is always complete.
+Folders follow the package's output rule and are written complete or not at all
+(:mod:`cosim.files`: a new or empty folder, or an earlier run's with ``overwrite``; written
+under a hidden sibling and renamed at the end).  :func:`write_into` fills a folder already
+claimed (:func:`cosim.master.runner.run_scene` claims it before the run starts, so that an
+unwritable path or a full disk is known in a second); :func:`write_results` claims and fills.
 """
 from __future__ import annotations
 
@@ -13,7 +16,8 @@ import numpy as np
 
 from fmu_src.ground_records import G
 
-from ..files import replaced_folder
+from ..files import history_bytes, output_target, written_folder, PLOT_BYTES
+from .fmi import raise_pending_interrupt
 from .names import column, element_name
 from .results import (IMPACT_COLUMNS, SimulationResult, Summary, energy_history, impact_table, impact_times,
                       summarize)
@@ -113,26 +117,34 @@ def write_impacts(result: SimulationResult, path: Path) -> None:
                              for name, _ in IMPACT_COLUMNS])
 
 
-def write_results(result: SimulationResult, folder: str | Path, plots: bool = True,
-                  summary: Summary | None = None, parquet: bool = False) -> Path:
+def write_into(folder: Path, result: SimulationResult, plots: bool = True, summary: Summary | None = None,
+               parquet: bool = False) -> None:
     """Write ``history.csv`` (with ``history_units.csv``), ``impacts.csv``, ``summary.json`` and the
-    plots (``parquet``: also ``history.parquet``) into ``folder``.
+    plots (``parquet``: also ``history.parquet``) into the (claimed, empty) ``folder`` (not after a
+    Ctrl-C that arrived during the last FMI call: :func:`~cosim.master.fmi.deferred_interrupts`)."""
+    raise_pending_interrupt()
+    summary = summary or summarize(result)
+    write_history(result, folder / "history.csv")
+    write_history_units(result, folder / "history_units.csv")
+    if parquet:
+        write_history_parquet(result, folder / "history.parquet")
+    if result.scene.contacts:
+        write_impacts(result, folder / "impacts.csv")
+    (folder / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
+    if plots:
+        plot_all(result, folder)
 
-    Everything goes to a temporary sibling first, renamed at the end; an
-    existing ``folder`` is replaced only once the new one is complete.
-    """
-    with replaced_folder(folder) as tmp:
-        summary = summary or summarize(result)
-        write_history(result, tmp / "history.csv")
-        write_history_units(result, tmp / "history_units.csv")
-        if parquet:
-            write_history_parquet(result, tmp / "history.parquet")
-        if result.scene.contacts:
-            write_impacts(result, tmp / "impacts.csv")
-        (tmp / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
-        if plots:
-            plot_all(result, tmp)
-    return Path(folder)
+
+def write_results(result: SimulationResult, folder: str | Path, plots: bool = True,
+                  summary: Summary | None = None, *, overwrite: bool = False, parquet: bool = False) -> Path:
+    """Write the results (:func:`write_into`) into ``folder`` by the output rule
+    (:func:`cosim.files.output_target`: an earlier run's folder is replaced only with
+    ``overwrite``); complete or not at all.  Returns the folder."""
+    target = output_target(folder, overwrite=overwrite)
+    expected = history_bytes(len(result.time), len(result.columns)) + (PLOT_BYTES if plots else 0)
+    with written_folder(target, "run", overwrite=overwrite, expected_bytes=expected) as pending:
+        write_into(pending.path, result, plots, summary, parquet=parquet)
+    return pending.target
 
 
 # -- plots -------------------------------------------------------------------------------------------
@@ -279,8 +291,8 @@ def plot_energy(result: SimulationResult, path: Path, plt) -> Path:
     e = energy_history(result)
     t = e["time"]
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    parts = [e["kinetic"], e["strain"], e["damping"], e["contact"]]
-    labels = ["kinetic", "strain", "structural damping", "contact dissipation"]
+    parts = [e["kinetic"], e["strain"], e["damping"], e["contact"], e["stored"]]
+    labels = ["kinetic", "strain", "structural damping", "contact dissipation", "contact spring"]
     if np.any(e["hysteretic"]):
         parts.append(e["hysteretic"])
         labels.append("hysteretic (yielding storeys)")

@@ -12,16 +12,16 @@ Energy balance (J), from the outputs of the FMUs alone::
 
     E_initial + sum_buildings E_input(t)
         = sum_buildings (E_kinetic + E_strain + E_damping + E_hysteretic)(t)
-          + sum_contacts E_dissipated(t) + residual(t)
+          + sum_contacts (E_dissipated + E_stored)(t) + residual(t)
 
-``E_initial`` is the mechanical energy the buildings start with (x0, v0),
-``E_input`` the work of the ground motion on the relative motion, ``E_strain`` the elastic
-(stored) part of the storeys' energy and ``E_hysteretic`` what yielding storeys dissipated
-(0 for linear storeys).  In a
-monolithic solution the residual is the elastic energy stored in contacts
-that are closed at t (zero once they open); in co-simulation it also holds
-the coupling error: the work the buildings receive from the mean contact
-forces minus what the contact FMUs account for.  ``energy_residual_relative``
+``E_initial`` is the mechanical energy the system starts with (the buildings' x0, v0 and
+any contact closed at t = 0), ``E_input`` the work of the ground motion on the relative
+motion, ``E_strain`` the elastic (stored) part of the storeys' energy, ``E_hysteretic`` what
+yielding storeys dissipated (0 for linear storeys), ``E_stored = k delta^(n+1) / (n+1)`` the
+elastic energy of a contact spring closed at t (``delta`` > 0, the contact's own output; zero
+once it opens: a run that ends during an impact holds that energy in the spring, which is not
+a residual).  The residual is the coupling's error: the work the buildings receive from the
+mean contact forces minus what the contact FMUs account for.  ``energy_residual_relative``
 divides by ``E_initial + E_input`` at the end.
 """
 from __future__ import annotations
@@ -217,6 +217,8 @@ class Summary:
     energy_residual_relative: float
     cost: Cost
     warnings: list[str] = field(default_factory=list)
+    #: elastic energy held by contacts closed at the end (J), see the module docstring
+    energy_contact_stored_J: float = 0.0
     energy_hysteretic_J: float = 0.0
     #: what ran, from the effective parameters (:func:`system_description`)
     system: str = ""
@@ -260,7 +262,8 @@ class Summary:
             energy_initial_J=self.energy_initial_J, energy_input_J=self.energy_input_J,
             energy_kinetic_J=self.energy_kinetic_J, energy_strain_J=self.energy_strain_J,
             energy_damping_J=self.energy_damping_J, energy_contact_J=self.energy_contact_J,
-            energy_hysteretic_J=self.energy_hysteretic_J, energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
+            energy_contact_stored_J=self.energy_contact_stored_J, energy_hysteretic_J=self.energy_hysteretic_J,
+            energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
         out.update(self.cost.to_dict())
         out["warnings"] = list(self.warnings)
         out["scene_as_run"] = self.scene_as_run
@@ -387,12 +390,25 @@ def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
     contacts = [c.name for c in scene.contacts]
     kinetic = total(buildings, "E_kinetic")
     strain = total(buildings, "E_strain")
-    initial = kinetic[0] + strain[0]
+    stored = zero.copy()
+    for spec in scene.contacts:
+        if result.has(column(spec.name, "delta")):
+            stored = stored + contact_stored_energy(result[column(spec.name, "delta")], float(spec.value("k")),
+                                                    float(spec.value("n")))
+    initial = kinetic[0] + strain[0] + stored[0]
     terms = dict(time=result.time, input=initial + total(buildings, "E_input"), kinetic=kinetic, strain=strain,
-                 damping=total(buildings, "E_damping"), contact=total(contacts, "E_dissipated"),
+                 damping=total(buildings, "E_damping"), contact=total(contacts, "E_dissipated"), stored=stored,
                  external=total(buildings, "E_external"), hysteretic=total(buildings, "E_hysteretic"))
-    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"] + terms["hysteretic"])
+    terms["residual"] = terms["input"] - (kinetic + strain + terms["damping"] + terms["contact"] + stored
+                                          + terms["hysteretic"])
     return terms
+
+
+def contact_stored_energy(delta: np.ndarray, k: float, n: float) -> np.ndarray:
+    """Elastic energy of a contact spring (J): ``k delta^(n+1) / (n+1)`` where closed (``delta`` > 0,
+    m), 0 where open (as :meth:`fmu_src.contact_laws.ContactLaw.elastic_energy`)."""
+    closed = np.clip(delta, 0.0, None)
+    return k * closed ** (n + 1.0) / (n + 1.0)
 
 
 def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
@@ -515,7 +531,8 @@ def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = N
         buildings=buildings, contacts=contacts,
         energy_initial_J=float(e["input"][0]), energy_input_J=energy_in, energy_kinetic_J=float(e["kinetic"][-1]),
         energy_strain_J=float(e["strain"][-1]), energy_damping_J=float(e["damping"][-1]),
-        energy_contact_J=float(e["contact"][-1]), energy_residual_J=residual,
+        energy_contact_J=float(e["contact"][-1]), energy_contact_stored_J=float(e["stored"][-1]),
+        energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
         cost=result.cost, warnings=sampling_warnings(contacts) + accuracy_warnings(
             residual, energy_in, result.strategy, scene.step, energy_limit, creation_limit),

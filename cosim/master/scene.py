@@ -93,6 +93,9 @@ class Override:
     instance: str | None
     variable: str
     value: Any
+    #: how error messages name where the value came from, as the user wrote it (``--set
+    #: left.m=1e-300``, ``--step 1e-12``); None: ``--set`` and :attr:`text`
+    origin: str | None = field(default=None, compare=False)
 
     @classmethod
     def of(cls, target: str, value: Any) -> "Override":
@@ -108,6 +111,11 @@ class Override:
         """How errors quote it: ``left.m[1]=250000.0``."""
         key = f"{self.instance}.{self.variable}" if self.instance else self.variable
         return f"{key}={self.value!r}"
+
+    @property
+    def where(self) -> str:
+        """Where the value came from, for error messages: ``--set left.m=1e-300`` as typed."""
+        return self.origin or f"--set {self.text}"
 
 
 def parse_override(text: str) -> Override:
@@ -125,6 +133,7 @@ def parse_override(text: str) -> Override:
     except tomllib.TOMLDecodeError:
         value = value_text  # a bare word: record names, model names
     override = Override.of(key, value)
+    override = Override(override.instance, override.variable, value, origin=f"--set {text.strip()}")
     if not override.variable or (override.instance is not None and not override.instance):
         raise SceneError(f"--set {text!r}: expected instance.variable=value")
     return override
@@ -219,6 +228,13 @@ class Scene:
     interfaces: dict[str, FmuInterface] | None = field(default=None, repr=False, compare=False)
     #: the overrides applied after the file was read (their text, in order)
     overrides: tuple[str, ...] = ()
+    #: where each top-level setting came from (``stop_time`` -> ``"--set stop_time=1e9"`` or
+    #: ``"scenes/default.toml, line 3"``), for messages about the run's size
+    origins: dict[str, str] = field(default_factory=dict, repr=False, compare=False)
+
+    def origin(self, key: str) -> str:
+        """Where the top-level setting ``key`` came from (see :attr:`origins`)."""
+        return self.origins.get(key, self.source)
 
     @property
     def source(self) -> str:

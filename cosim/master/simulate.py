@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from .coupling import get_strategy
+from .fmi import FMUError
 from .guard import StabilityGuard
 from .results import Cost, SimulationResult
 
@@ -42,10 +43,25 @@ class Recorder:
         self.count += 1
 
 
+def initial_outputs_finite(system: "System") -> None:
+    """Raise :class:`~cosim.master.fmi.FMUError` naming the instance and output if an output is
+    not finite after initialisation (before any step: the inputs wired from it would carry NaN
+    into every instance, and the first one to check its inputs would be blamed)."""
+    y = system.y
+    if np.isfinite(y).all():
+        return
+    bad = system.columns[int(np.flatnonzero(~np.isfinite(y))[0])]
+    instance, _, variable = bad.partition(".")
+    value = float(y[system.columns.index(bad)])
+    raise FMUError(instance, "fmi2ExitInitializationMode", 3,
+                   [f"{instance}: output {variable} = {value!r} after initialisation: its parameters are beyond "
+                    f"what its arithmetic supports (check the magnitudes of its masses, stiffnesses and periods)"])
+
+
 def simulate(system: "System", strategy: str | type | None = None, stop_time: float | None = None,
              step: float | None = None, progress: bool | None = None,
              callback: Callable[[float], None] | None = None, check_stability: bool = True,
-             **options: Any) -> SimulationResult:
+             max_steps: int | None = None, **options: Any) -> SimulationResult:
     """Initialise ``system`` and run it from t0 = 0 to ``stop_time`` with a coupling strategy.
 
     ``strategy``: a name from :data:`cosim.master.coupling.STRATEGIES` or a
@@ -55,7 +71,10 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     ``options`` go to the strategy's constructor.  ``check_stability``: after every
     step, :class:`cosim.master.guard.StabilityGuard` raises
     :class:`cosim.master.guard.InstabilityError` (saying what to change) when the run has
-    produced non-finite values, a penetration beyond physical sense or created energy.
+    produced non-finite values, a penetration beyond physical sense or created energy, or when
+    its work explodes (more than ``max_steps`` accepted steps, or refinements and contact
+    substeps far beyond any impact's needs).  The outputs at t0 (after initialisation) are
+    checked before the first step: a non-finite one stops the run naming the instance.
     """
     scene = system.scene
     stop_time = scene.stop_time if stop_time is None else float(stop_time)
@@ -68,9 +87,10 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     wall = time.perf_counter()
     system.initialize(0.0, stop_time, host=cls.host)
     solver = cls(system, 0.0, stop_time, step, **options)
+    initial_outputs_finite(system)
     guard = None
     if check_stability:
-        guard = StabilityGuard(system)
+        guard = StabilityGuard(system, max_steps=max_steps, base_step=step)
     recorder = Recorder(system, int(np.ceil(stop_time / step)) + 2)
     recorder.record(0.0)
     bar = None

@@ -34,6 +34,16 @@ if TYPE_CHECKING:
     from .scene import InstanceSpec, Scene
 
 
+def output_names(spec: "InstanceSpec", interface: Any, type: str) -> list[str]:
+    """The outputs of type ``type`` an instance records: every one of its FMU, but for a building
+    only the floors it has (``n_storeys``)."""
+    names = interface.names("output", type)
+    if spec.fmu == BUILDING:
+        n = int(spec.parameters["n_storeys"])
+        names = [x for x in names if (interface.variables[x].index or 0) <= n]
+    return names
+
+
 class Catalog(Mapping[str, FMU]):
     """The package's FMUs in one folder, each loaded (extracted) once."""
 
@@ -133,12 +143,7 @@ class System:
 
     # -- assembly --------------------------------------------------------------------------------
     def _output_names(self, spec: "InstanceSpec", fmu: Any, type: str) -> list[str]:
-        interface = fmu.interface
-        names = interface.names("output", type)
-        if spec.fmu == BUILDING:  # only the floors the building uses
-            n = int(spec.parameters["n_storeys"])
-            names = [x for x in names if (interface.variables[x].index or 0) <= n]
-        return names
+        return output_names(spec, fmu.interface, type)
 
     def _build(self, scene: "Scene", created: list[InstanceProtocol]) -> None:
         specs = scene.instances()

@@ -41,6 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..master.fmi import PYTHONFMU_FATAL, slave_message
 from .ssp import OSP_NS, SSC_NS, SSD_NAME, SSD_NS, System, build_ssd, check_system
 
 NS_PER_S = 1_000_000_000
@@ -349,7 +350,15 @@ def run_isolated(module: str, request, error: type[Exception], tool: str, env_ex
         proc = subprocess.run([sys.executable, "-m", module, str(request_file), str(answer)],
                               env=env, cwd=tmp, capture_output=True, text=True)
         if not answer.exists():
-            tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
+            text = (proc.stderr or proc.stdout).strip()
+            tail = "\n".join(text.splitlines()[-15:])
+            # libcosim aborts its process when an FMU refuses initialisation (fmi2Fatal, the only
+            # refusal pythonfmu can give there); the refusal itself is in pythonfmu's wrapper
+            start = text.find(PYTHONFMU_FATAL)
+            refusal = slave_message(text[start:]) if start >= 0 else ""
+            if refusal and not refusal.startswith(PYTHONFMU_FATAL):
+                raise error(f"{tool} stopped (exit code {proc.returncode}) when an FMU refused to "
+                            f"initialise: {refusal}")
             raise error(f"{tool} child process failed (exit code {proc.returncode}):\n{tail}")
         status, payload = pickle.loads(answer.read_bytes())
     if status == "error":

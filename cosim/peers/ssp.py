@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
+from ..files import file_target, written_file
 from ..fmus import BUILDING, GROUND, POUNDING
 from ..master.coupling import COUPLINGS
 from ..master.loader import load_scene
@@ -387,16 +388,11 @@ def write_ssp(system: System, path: Path | str) -> Path:
         files[arcname] = Path(comp.fmu)
         sources[comp.name] = arcname
     ssd = build_ssd(system, sources)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f".{path.name}.partial")
-    try:
+    with written_file(path) as partial:
         with zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as zf:
             zf.writestr(SSD_NAME, ssd)
             for arcname, fmu in files.items():
                 zf.write(fmu, arcname)
-        partial.replace(path)
-    finally:
-        partial.unlink(missing_ok=True)
     return path
 
 
@@ -621,14 +617,17 @@ def load_ssp(path: Path | str, extract_to: Path | str):
 
 
 def export(scene: str | Path, path: Path | str, overrides: Iterable[Override | str] = (), *,
-           fmu_dir: Path | str) -> tuple[Path, list[str], Scene]:
+           fmu_dir: Path | str, overwrite: bool = False) -> tuple[Path, list[str], Scene]:
     """Load ``scene`` as a run would (overrides checked against the FMUs in ``fmu_dir``) and write
     it as an SSP package at ``path``; returns the package, the notes of :func:`export_notes`
-    (not issued as warnings: the caller prints them) and the scene.  Raises
-    :class:`NotExpressibleError` for a scene SSP 1.0 cannot express."""
+    (not issued as warnings: the caller prints them) and the scene.  ``path`` follows the
+    package's file rule (:func:`cosim.files.file_target`: a new path, or an existing file with
+    ``overwrite``; never a folder).  Raises :class:`NotExpressibleError` for a scene SSP 1.0
+    cannot express, :class:`cosim.files.OutputError` for a refused path."""
     fmu_dir = Path(fmu_dir)
     with Catalog(fmu_dir) as catalog:
         loaded = load_scene(scene, overrides, catalog)
+    path = file_target(path, overwrite=overwrite)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SspWarning)
         out, notes = export_scene(loaded, path, fmu_dir)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ...files import replaced_folder
+from ...files import output_target, written_folder
 from ..calibrate import FMURunner
 from .claims import claims
 from .common import COMMAND, PUBLISHED_LABELS, Claim, Report, Settings, printed_zeta
@@ -37,12 +37,16 @@ __all__ = ["build_report", "COMMAND", "PUBLISHED_LABELS", "Claim", "Report", "Se
 
 
 # ----------------------------------------------------------------------------------------------
-def build_report(out: str | Path, quick: bool = False, fmu_dir: str | Path | None = None, jobs: int = 1) -> Path:
-    """Regenerate the report into ``out`` (replaced when complete); returns the folder."""
+def build_report(out: str | Path, quick: bool = False, fmu_dir: str | Path | None = None, jobs: int = 1,
+                 overwrite: bool = False) -> Path:
+    """Regenerate the report into ``out``; returns the folder.  The folder follows the output
+    rule (:mod:`cosim.files`: a new or empty folder, or an earlier report's with ``overwrite``),
+    is claimed before the work starts and written complete or not at all."""
     t0 = time.perf_counter()
-    with replaced_folder(out) as tmp:
-        _write_report(tmp, quick, fmu_dir, jobs, t0)
-    return Path(out)
+    target = output_target(out, overwrite=overwrite)
+    with written_folder(target, "report", overwrite=overwrite) as pending:
+        _write_report(pending.path, quick, fmu_dir, jobs, t0)
+    return pending.target
 
 
 def _write_report(tmp: Path, quick: bool, fmu_dir, jobs: int, t0: float) -> None:

@@ -23,6 +23,11 @@ _WORKER: dict = {}
 
 
 def _init_worker(fmu_dir: str) -> None:
+    import signal
+
+    # Ctrl-C reaches the whole process group: the main process ends the report ("interrupted");
+    # a worker interrupted mid-case would only print a traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _WORKER["runner"] = CaseRunner(fmu_dir)
 
 
@@ -78,11 +83,11 @@ class _Cases:
             return [f.result() for f in futures]
         return [_run_case(self.runner, scene, ov) for scene, ov in jobs]
 
-    def close(self):
+    def close(self, interrupted: bool = False):
         if self.runner is not None:
             self.runner.close()
-        if self.pool is not None:
-            self.pool.shutdown()
+        if self.pool is not None:   # interrupted: drop the queued cases, do not wait for running ones
+            self.pool.shutdown(wait=not interrupted, cancel_futures=interrupted)
 
 
 def _fig8_sweep(rep, records, rows_by_scene, x, xlabel, title, note, file, caption) -> str:
@@ -116,8 +121,10 @@ def fig8(rep: Report, runner: FMURunner) -> dict:
     cases = _Cases(runner.catalog.fmu_dir, rep.jobs)
     try:
         rows = iter(cases.map(jobs))
-    finally:
-        cases.close()
+    except BaseException:
+        cases.close(interrupted=True)
+        raise
+    cases.close()
     res = {key: {} for key in sweeps}
     for scene, _ in records:
         for key in sweeps:

@@ -153,9 +153,15 @@ def ctrl_c_deferred() -> Iterator[Interrupts]:
     event-loop thread (a local cluster interrupted while its workers register cannot be closed
     any more: ``UnboundLocalError`` from ``distributed.utils.sync`` after 12 s).  The handler
     only notes the Ctrl-C (main thread only; elsewhere a no-op).
+
+    A process started with SIGINT ignored (a job a script put in the background with ``&``: the
+    shell makes it ignore SIGINT so that a Ctrl-C meant for the foreground spares it; the
+    disposition is inherited across ``exec``) keeps ignoring it here too, as it does for the
+    rest of the study: a Ctrl-C is never honoured while the study starts and then dropped
+    while its cases run.
     """
     interrupts = Interrupts()
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         yield interrupts
         return
     previous = signal.signal(signal.SIGINT, interrupts.note)
