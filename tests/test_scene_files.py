@@ -211,7 +211,7 @@ def test_ground_scaling_targets_as_engineers_write_them(tmp_path, catalog):
      r"t\.toml, line 8: \[ground\]: at most one of target_pga, target_pga_g, target_sa may be set; "
      r"got target_pga = 2\.9 and target_pga_g = 0\.3 \(set the others to 0\)"),
     ('target_pga = 2.9', ["ground.target_sa={period=0.5, value=4.9}"],
-     r"^--set ground\.target_sa=\{'period': 0\.5, 'value': 4\.9\}: \[ground\]: at most one of"),
+     r"^--set ground\.target_sa=\{period=0\.5, value=4\.9\}: \[ground\]: at most one of"),   # as typed
 ])
 def test_bad_scaling_targets_are_one_line_errors(tmp_path, catalog, ground, overrides, match):
     path = write(tmp_path, BASE.replace('record = "elcentro1940"', 'record = "elcentro1940"\n' + ground))
