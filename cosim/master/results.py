@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
+from .impacts import contact_floor_accelerations
 from .names import column, element_name
 
 if TYPE_CHECKING:
@@ -112,9 +113,12 @@ class ContactSummary:
     step_over_time_scale: float | None = None
     #: the largest latched approach speed (m/s); not a key of summary.json
     peak_impact_velocity_m_s: float = 0.0
+    #: contacts shallower than the contact's graze_depth (not impacts)
+    grazes: int = 0
 
     def to_dict(self) -> dict[str, Any]:
-        out = dict(impacts=self.impacts, peak_force_N=self.peak_force_N, peak_mean_force_N=self.peak_mean_force_N,
+        out = dict(impacts=self.impacts, grazes=self.grazes, peak_force_N=self.peak_force_N,
+                   peak_mean_force_N=self.peak_mean_force_N,
                    dissipated_energy_J=self.dissipated_energy_J, max_penetration_m=self.max_penetration_m,
                    first_impact_s=self.first_impact_s)
         if self.step_over_time_scale is not None:
@@ -124,8 +128,16 @@ class ContactSummary:
 
 @dataclass(frozen=True)
 class BuildingSummary:
-    """One building over a run: peak floor displacement (and where, when), peak drift, base shear;
-    and its storeys' inelastic demand (``building.fmu``'s outputs at the end of the run):
+    """One building over a run: peak floor displacement (and where, when), peak drift, drift ratio
+    and absolute floor acceleration (and where), base shear; per floor/storey lists of the peaks.
+
+    Peaks are located inside the steps when the building FMU reports its own running peaks
+    (``x_peak``, ``drift_peak``, ``a_peak``, ``drift_ratio_peak``; ``peaks_in_step`` True),
+    else taken at the communication points.  A floor that pounds also gets the contact's
+    contact force inside the steps (:func:`cosim.master.impacts.contact_floor_accelerations`):
+    the building's own peak sees only the force it held over each step.
+
+    Inelastic demand of its storeys (``building.fmu``'s outputs at the end of the run):
 
     * ``hysteresis``: the storey law (``linear``, ``bilinear``, ``bouc_wen``);
     * ``peak_ductility``: the largest ``mu[i]``, peak drift (located inside the steps) over the
@@ -142,6 +154,15 @@ class BuildingSummary:
     peak_drift_m: float
     peak_drift_storey: int
     peak_base_shear_N: float
+    peak_drift_ratio: float = 0.0
+    peak_drift_ratio_storey: int = 1
+    peak_acceleration_m_s2: float = 0.0
+    peak_acceleration_floor: int = 1
+    peaks_in_step: bool = False
+    peak_displacements_m: tuple[float, ...] = ()
+    peak_drifts_m: tuple[float, ...] = ()
+    peak_drift_ratios: tuple[float, ...] = ()
+    peak_accelerations_m_s2: tuple[float, ...] = ()
     hysteresis: str = "linear"
     peak_ductility: float | None = None
     peak_ductility_storey: int | None = None
@@ -159,6 +180,12 @@ class BuildingSummary:
                     peak_displacement_floor=self.peak_displacement_floor,
                     peak_displacement_time_s=self.peak_displacement_time_s, peak_drift_m=self.peak_drift_m,
                     peak_drift_storey=self.peak_drift_storey, peak_base_shear_N=self.peak_base_shear_N,
+                    peak_drift_ratio=self.peak_drift_ratio, peak_drift_ratio_storey=self.peak_drift_ratio_storey,
+                    peak_acceleration_m_s2=self.peak_acceleration_m_s2,
+                    peak_acceleration_floor=self.peak_acceleration_floor, peaks_in_step=self.peaks_in_step,
+                    peak_displacements_m=list(self.peak_displacements_m), peak_drifts_m=list(self.peak_drifts_m),
+                    peak_drift_ratios=list(self.peak_drift_ratios),
+                    peak_accelerations_m_s2=list(self.peak_accelerations_m_s2),
                     hysteresis=self.hysteresis, peak_ductility=self.peak_ductility,
                     peak_ductility_storey=self.peak_ductility_storey, residual_drift_m=self.residual_drift_m,
                     residual_drift_storey=self.residual_drift_storey, hysteretic_energy_J=self.hysteretic_energy_J)
@@ -193,6 +220,19 @@ class Summary:
     #: elastic energy held by contacts closed at the end (J), see the module docstring
     energy_contact_stored_J: float = 0.0
     energy_hysteretic_J: float = 0.0
+    #: what ran, from the effective parameters (:func:`system_description`)
+    system: str = ""
+    #: the overrides applied to the scene file (their text)
+    overrides: list[str] = field(default_factory=list)
+    #: the scene as it ran, in the scene format (:meth:`cosim.master.scene.Scene.as_run`)
+    scene_as_run: dict[str, Any] = field(default_factory=dict)
+    #: package version, FMU and record files with their SHA-256 (:mod:`cosim.master.provenance`)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def grazes(self) -> int:
+        """Contacts of every level shallower than their graze_depth (not counted as impacts)."""
+        return sum(c.grazes for c in self.contacts.values())
 
     @property
     def max_penetration_m(self) -> float:
@@ -213,9 +253,10 @@ class Summary:
     def to_dict(self) -> dict[str, Any]:
         """``summary.json``: the keys and their order as the package has always written them."""
         out: dict[str, Any] = dict(
-            scene=self.scene, description=self.description, coupling=self.coupling, step_s=self.step_s,
+            scene=self.scene, description=self.description, system=self.system, overrides=list(self.overrides),
+            coupling=self.coupling, step_s=self.step_s,
             stop_time_s=self.stop_time_s, instances=list(self.instances), peak_force_N=self.peak_force_N,
-            impacts=self.impacts, dissipated_energy_J=self.dissipated_energy_J,
+            impacts=self.impacts, grazes=self.grazes, dissipated_energy_J=self.dissipated_energy_J,
             buildings={name: b.to_dict() for name, b in self.buildings.items()},
             contacts={name: c.to_dict() for name, c in self.contacts.items()},
             energy_initial_J=self.energy_initial_J, energy_input_J=self.energy_input_J,
@@ -225,6 +266,8 @@ class Summary:
             energy_residual_J=self.energy_residual_J, energy_residual_relative=self.energy_residual_relative)
         out.update(self.cost.to_dict())
         out["warnings"] = list(self.warnings)
+        out["scene_as_run"] = self.scene_as_run
+        out["provenance"] = self.provenance
         return out
 
 
@@ -255,6 +298,20 @@ def impact_times(result: SimulationResult, contact: str) -> np.ndarray:
     return result.time[new]
 
 
+def first_impact_time(result: SimulationResult, contact: str) -> float | None:
+    """Onset time (s) of ``contact``'s first impact: the contact FMU's ``t_onset`` where its impact
+    counter first rises (it counts an impact once the penetration reaches graze_depth, after
+    the onset), else the start of that step; None without impacts."""
+    counts = result[column(contact, "impacts")]
+    new = np.flatnonzero(np.diff(counts) > 0)
+    if not new.size:
+        return None
+    k = int(new[0]) + 1
+    if result.has(column(contact, "t_onset")):
+        return float(result[column(contact, "t_onset")][k])
+    return float(result.time[k - 1])
+
+
 def impact_onsets(result: SimulationResult) -> list[float]:
     """Start times (s) of the communication steps in which any contact counted a new impact,
     sorted (the resolved contact's onset lies in that step; the plain law's in the step before)."""
@@ -264,6 +321,57 @@ def impact_onsets(result: SimulationResult) -> list[float]:
         new = np.flatnonzero(np.diff(counts) > 0)
         times.extend(float(t) for t in result.time[new])
     return sorted(times)
+
+
+#: the columns of ``impacts.csv``, with their units
+IMPACT_COLUMNS = (("contact", ""), ("kind", ""), ("t_onset_s", "s"), ("approach_speed_m_s", "m/s"),
+                  ("peak_force_N", "N"), ("max_penetration_m", "m"), ("duration_s", "s"),
+                  ("dissipated_energy_J", "J"), ("CR_achieved", "1"))
+
+
+def impact_table(result: SimulationResult) -> list[dict[str, Any]]:
+    """One row per contact of every contact instance, sorted by onset: ``kind`` is ``impact``,
+    ``graze`` (shallower than graze_depth) or ``in progress`` (not ended at the end of the run).
+
+    Read from the contact FMU's outputs at the end of the step in which the contact ended
+    (``contacts_ended`` rises; ``grazes`` rises with it for a graze): onset time, approach speed,
+    peak force, largest penetration, duration, dissipated energy and achieved CR of that contact.
+    Two contacts ending in one communication step (a fixed step longer than a bounce) leave the
+    details of the last only: the others get a row of kind ``impact (not detailed)`` with its
+    step's end time and no numbers.
+    """
+    rows: list[dict[str, Any]] = []
+    nan = float("nan")
+    for c in result.scene.contacts:
+        name = c.name
+        if not result.has(column(name, "contacts_ended")):
+            continue
+
+        def at(variable, k):
+            return float(result[column(name, variable)][k])
+
+        ended = result[column(name, "contacts_ended")]
+        grazes = result[column(name, "grazes")]
+        for k in np.flatnonzero(np.diff(ended) > 0) + 1:
+            count = int(ended[k] - ended[k - 1])
+            grazed = int(grazes[k] - grazes[k - 1])
+            for _ in range(count - 1):   # ended inside the same step as the detailed one
+                rows.append(dict(contact=name, kind="impact (not detailed)", t_onset_s=float(result.time[k]),
+                                 approach_speed_m_s=nan, peak_force_N=nan, max_penetration_m=nan, duration_s=nan,
+                                 dissipated_energy_J=nan, CR_achieved=nan))
+            rows.append(dict(contact=name, kind="graze" if grazed and count == 1 else "impact",
+                             t_onset_s=at("t_onset", k), approach_speed_m_s=at("v_impact", k),
+                             peak_force_N=at("F_peak", k), max_penetration_m=at("delta_max", k),
+                             duration_s=at("contact_time", k), dissipated_energy_J=at("E_last", k),
+                             CR_achieved=at("CR_achieved", k)))
+        k = result.time.size - 1
+        if result.has(column(name, "in_contact")) and result[column(name, "in_contact")][k]:
+            rows.append(dict(contact=name, kind="in progress", t_onset_s=at("t_onset", k),
+                             approach_speed_m_s=at("v_impact", k), peak_force_N=at("F_peak", k),
+                             max_penetration_m=at("delta_max", k), duration_s=at("contact_time", k),
+                             dissipated_energy_J=nan, CR_achieved=nan))
+    rows.sort(key=lambda r: r["t_onset_s"])
+    return rows
 
 
 def energy_history(result: SimulationResult) -> dict[str, np.ndarray]:
@@ -306,7 +414,6 @@ def contact_stored_energy(delta: np.ndarray, k: float, n: float) -> np.ndarray:
 def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
     fmax = result[column(name, "F_max")] if result.has(column(name, "F_max")) else result[column(name, "F")]
     delta = result[column(name, "delta")] if result.has(column(name, "delta")) else np.zeros(1)
-    times = impact_times(result, name)
     ratio = result.stats.get("step_over_time_scale", {}).get(name)
     v_impact = (float(np.max(np.abs(result[column(name, "v_impact")])))
                 if result.has(column(name, "v_impact")) else 0.0)
@@ -316,10 +423,28 @@ def _contact_summary(result: SimulationResult, name: str) -> ContactSummary:
         peak_mean_force_N=float(np.max(result[column(name, "F")])),
         dissipated_energy_J=_final(result, column(name, "E_dissipated")),
         max_penetration_m=float(max(0.0, np.max(delta))),
-        first_impact_s=float(times[0]) if times.size else None,
+        first_impact_s=first_impact_time(result, name),
+        grazes=int(_final(result, column(name, "grazes"))),
         # plain force law: how finely the master sampled its impacts
         step_over_time_scale=float(ratio) if ratio is not None else None,
         peak_impact_velocity_m_s=v_impact)
+
+
+#: storey height (m) assumed for drift ratios when the building FMU has no ``storey_height``
+DEFAULT_STOREY_HEIGHT = 3.0
+
+
+def _floor_history(result: SimulationResult, name: str, variable: str, n: int) -> np.ndarray:
+    return np.abs(np.column_stack([result[column(name, element_name(variable, i))] for i in range(1, n + 1)]))
+
+
+def _peaks(result: SimulationResult, name: str, variable: str, n: int) -> tuple[np.ndarray, bool]:
+    """Per floor/storey peak of ``|variable|``: the FMU's in-step running peak ``<variable>_peak``
+    at the end of the run when it has one (True), else the largest sample (False)."""
+    if result.has(column(name, element_name(f"{variable}_peak", 1))):
+        return np.array([float(result[column(name, element_name(f"{variable}_peak", i))][-1])
+                         for i in range(1, n + 1)]), True
+    return np.max(_floor_history(result, name, variable, n), axis=0), False
 
 
 def _final_row(result: SimulationResult, name: str, variable: str, n: int) -> np.ndarray | None:
@@ -330,12 +455,25 @@ def _final_row(result: SimulationResult, name: str, variable: str, n: int) -> np
     return np.array([result[c][-1] for c in columns])
 
 
-def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSummary:
-    x = np.abs(np.column_stack([result[column(name, element_name("x", i))] for i in range(1, n + 1)]))
-    d = np.abs(np.column_stack([result[column(name, element_name("drift", i))] for i in range(1, n + 1)]))
-    kx, fx = np.unravel_index(np.argmax(x), x.shape)
-    kd, fd = np.unravel_index(np.argmax(d), d.shape)
+def _building_summary(result: SimulationResult, name: str, n: int,
+                      spikes: Mapping[int, float] | None = None) -> BuildingSummary:
     spec = result.scene.instance(name)
+    x_samples = _floor_history(result, name, "x", n)
+    x, in_step = _peaks(result, name, "x", n)
+    d, _ = _peaks(result, name, "drift", n)
+    a, _ = _peaks(result, name, "a", n)
+    for floor, value in (spikes or {}).items():   # the contacts' instantaneous peak forces
+        a[floor - 1] = max(a[floor - 1], value)
+    heights = []
+    for i in range(1, n + 1):
+        try:
+            heights.append(float(spec.value(element_name("storey_height", i))))
+        except KeyError:                            # a building.fmu without storey heights
+            heights.append(DEFAULT_STOREY_HEIGHT)
+    ratio = d / np.array(heights)
+    fx, fd, fr, fa = (int(np.argmax(v)) for v in (x, d, ratio, a))
+    # when: the sample closest to the peak of that floor (the in-step peak lies in an adjacent step)
+    kx = int(np.argmax(x_samples[:, fx]))
     hysteresis = str(spec.value("hysteresis"))
     # the FMU's in-step peaks and end values (mu = 0 where a storey has no yield shear)
     mu = _final_row(result, name, "mu", n)
@@ -350,19 +488,37 @@ def _building_summary(result: SimulationResult, name: str, n: int) -> BuildingSu
         residual_storey = int(np.argmax(np.abs(residual))) + 1
         residual_m = float(residual[residual_storey - 1])
     return BuildingSummary(
-        n_storeys=n, peak_displacement_m=float(x[kx, fx]), peak_displacement_floor=int(fx + 1),
-        peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[kd, fd]),
-        peak_drift_storey=int(fd + 1), peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))),
-        hysteresis=hysteresis, peak_ductility=peak_mu, peak_ductility_storey=storey_mu,
-        residual_drift_m=residual_m, residual_drift_storey=residual_storey,
+        n_storeys=n, peak_displacement_m=float(x[fx]), peak_displacement_floor=fx + 1,
+        peak_displacement_time_s=float(result.time[kx]), peak_drift_m=float(d[fd]), peak_drift_storey=fd + 1,
+        peak_base_shear_N=float(np.max(np.abs(result[column(name, "base_shear")]))),
+        peak_drift_ratio=float(ratio[fr]), peak_drift_ratio_storey=fr + 1, peak_acceleration_m_s2=float(a[fa]),
+        peak_acceleration_floor=fa + 1, peaks_in_step=in_step, peak_displacements_m=tuple(map(float, x)),
+        peak_drifts_m=tuple(map(float, d)), peak_drift_ratios=tuple(map(float, ratio)),
+        peak_accelerations_m_s2=tuple(map(float, a)), hysteresis=hysteresis, peak_ductility=peak_mu,
+        peak_ductility_storey=storey_mu, residual_drift_m=residual_m, residual_drift_storey=residual_storey,
         hysteretic_energy_J=_final(result, column(name, "E_hysteretic")))
 
 
-def summarize(result: SimulationResult) -> Summary:
-    """The numbers a person wants from a run (SI units in the names)."""
+#: |energy residual| / input energy above which a run ends with a warning (issue 15: 1 %); the
+#: bundled scenes at their settings stay below 0.2 % (docs/accuracy.md)
+ENERGY_RESIDUAL_LIMIT = 0.01
+#: -residual / input energy above which the run is said to have created energy: the residual of a
+#: consistent co-simulation is the contact's stored elastic energy plus its coupling error, >= 0
+#: at the bundled scenes' settings (0 to +0.2 %); 0.1 % leaves room for round-off and the end of a
+#: run inside an impact
+ENERGY_CREATION_LIMIT = 0.001
+
+
+def summarize(result: SimulationResult, provenance: Mapping[str, Any] | None = None, *,
+              energy_limit: float = ENERGY_RESIDUAL_LIMIT, creation_limit: float = ENERGY_CREATION_LIMIT) -> Summary:
+    """The numbers a person wants from a run (SI units in the names).  ``provenance``: what the run
+    was made with (:func:`cosim.master.provenance.provenance`), kept as it is.  ``energy_limit``
+    and ``creation_limit`` (fractions of the input energy) set when :func:`accuracy_warnings` speaks."""
     scene = result.scene
     contacts = {c.name: _contact_summary(result, c.name) for c in scene.contacts}
-    buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name)) for b in scene.buildings}
+    spikes = contact_floor_accelerations(result)
+    buildings = {b.name: _building_summary(result, b.name, scene.n_storeys(b.name), spikes.get(b.name))
+                 for b in scene.buildings}
     e = energy_history(result)
     energy_in = float(e["input"][-1])
     residual = float(e["residual"][-1])
@@ -378,7 +534,44 @@ def summarize(result: SimulationResult) -> Summary:
         energy_contact_J=float(e["contact"][-1]), energy_contact_stored_J=float(e["stored"][-1]),
         energy_residual_J=residual,
         energy_residual_relative=residual / energy_in if energy_in > 0 else 0.0,
-        cost=result.cost, warnings=sampling_warnings(contacts), energy_hysteretic_J=float(e["hysteretic"][-1]))
+        cost=result.cost, warnings=sampling_warnings(contacts) + accuracy_warnings(
+            residual, energy_in, result.strategy, scene.step, energy_limit, creation_limit),
+        system=system_description(scene, _final(result, column(scene.ground.name, "pga")) if scene.ground else None),
+        overrides=list(scene.overrides), scene_as_run=scene.as_run(), provenance=dict(provenance or {}),
+        energy_hysteretic_J=float(e["hysteretic"][-1]))
+
+
+def system_description(scene: "Scene", pga: float | None = None) -> str:
+    """One line saying what runs, from the effective parameters (never the scene file's
+    description, which an override can make wrong): buildings and their fundamental periods,
+    the contact levels, gap and law, the record and its PGA (m/s^2, when known)."""
+    from fmu_src.ground_records import G
+
+    from .models import shear_building
+
+    parts = []
+    for b in scene.buildings:
+        n = int(b.value("n_storeys"))
+        parts.append(f"{b.name} {n}-storey (T1 = {float(shear_building(b).periods[0]):.3g} s)")
+    text = " and ".join(parts) if len(parts) <= 2 else ", ".join(parts)
+    if scene.contacts:
+        def law(c):
+            return f"gap {float(c.value('gap')):g} m, {c.value('model')} CR {float(c.value('CR')):g}"
+        laws = {law(c) for c in scene.contacts}
+        pairs = [(lv.floor_left, lv.floor_right) for lv in scene.levels]
+        floors = sorted({f for f, g in pairs if f == g})
+        if len(floors) == len(pairs) and len(floors) > 2 and floors == list(range(floors[0], floors[-1] + 1)):
+            where = f"floors {floors[0]}-{floors[-1]}"
+        else:
+            where = "floor " + ", ".join(str(f) if f == g else f"{f}/{g}" for f, g in pairs)
+        text += f"; pounding at {where}: " + ("; ".join(sorted(laws)) if len(laws) > 1 else laws.pop())
+    if scene.ground is not None:
+        record = str(scene.ground.value("record"))
+        label = record if len(record) <= 40 else "..." + record[-37:]
+        text += f"; under {label}" + (f" (PGA {pga / G:.3g} g)" if pga else "")
+    else:
+        text += "; free vibration"
+    return text
 
 
 #: plain-law step / impact time scale above which a run's summary warns (energy error ~ ratio)
@@ -394,5 +587,29 @@ def sampling_warnings(contacts: Mapping[str, ContactSummary]) -> list[str]:
         if ratio > SAMPLING_WARNING:
             out.append(f"{name}: plain force law stepped at up to {ratio:.2g} times the impact time scale: "
                        f"expect its dissipated energy off by about {ratio:.0%} at CR 0.65 (more at higher CR), "
-                       f"its peak force by less (docs/accuracy.md); use resolve_impacts=true or coupling=\"adaptive\"")
+                       f"its peak force by less, and impacts shorter than a few steps can be missed or merged "
+                       f"(docs/accuracy.md); use resolve_impacts=true or coupling=\"adaptive\"")
+    return out
+
+
+def accuracy_warnings(residual: float, energy_in: float, coupling: str, step: float,
+                      energy_limit: float = ENERGY_RESIDUAL_LIMIT,
+                      creation_limit: float = ENERGY_CREATION_LIMIT) -> list[str]:
+    """Warnings where a completed run lost accuracy: its energy balance residual (J) beyond
+    ``energy_limit`` of the input energy (J), or energy created (residual below
+    ``-creation_limit`` of it); each says what to change."""
+    if energy_in <= 0.0:
+        return []
+    ratio = residual / energy_in
+    remedy = (f"use coupling = \"adaptive\" (or \"gauss-seidel\") or a smaller step than h = {step:g} s"
+              if coupling == "jacobi" else f"use a smaller step than h = {step:g} s")
+    out = []
+    if ratio < -creation_limit:
+        out.append(f"the run created energy: the energy balance residual is {100 * ratio:.3g} % of the input "
+                   f"(limit -{100 * creation_limit:.3g} %, --creation-limit): a contact force handed "
+                   f"over late or too coarsely; {remedy}")
+    elif abs(ratio) > energy_limit:
+        out.append(f"energy balance residual {100 * ratio:.3g} % of the input (limit {100 * energy_limit:.3g} %, "
+                   f"--energy-limit): the coupling lost accuracy, expect the impacts and peaks to be off too; "
+                   f"{remedy}")
     return out
