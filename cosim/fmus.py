@@ -120,14 +120,22 @@ def fmu_hashes(fmu_dir: str | Path, names: Sequence[str] = FMU_NAMES) -> dict[st
 
 def _relative_imports(path: Path) -> list[str]:
     """Modules of the same package that ``path`` imports (``from .x import ...``)."""
+    stat = path.stat()
+    return list(_parsed_imports(str(path), stat.st_mtime_ns, stat.st_size))
+
+
+@functools.lru_cache(maxsize=256)
+def _parsed_imports(path: str, mtime_ns: int, size: int) -> tuple[str, ...]:
+    # Every run checks that its FMUs are up to date, which walks the sources' imports: parsing a
+    # file once per version (keyed by its modification time and size) saves ~0.2 s per run.
     names = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(ast.parse(Path(path).read_text(encoding="utf-8"))):
         if isinstance(node, ast.ImportFrom) and node.level == 1:
             if node.module:
                 names.append(node.module.split(".")[0])
             else:
                 names.extend(alias.name for alias in node.names)
-    return names
+    return tuple(names)
 
 
 def fmu_modules(spec: FmuSpec, source: Path = SOURCE) -> list[str]:
