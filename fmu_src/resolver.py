@@ -245,6 +245,7 @@ class ImpactResolver:
     def _probe(self, h: float, span: float) -> float:
         """Impulse [N s] the resolver's own bodies will receive over ``span`` s after this step."""
         probe = copy.copy(self)
+        probe.trace = None          # a look ahead, not the trajectory (a shallow copy shares the list)
         out = StepOutcome()
         probe._advance(h, h + span, probe.delta_end, probe.delta_dot_end, out)
         return max(out.impulse, 0.0)
@@ -307,6 +308,7 @@ class ImpactResolver:
         if not emitted > 0.0:
             return 0.0
         probe = copy.copy(self)
+        probe.trace = None          # a look ahead, not the trajectory (a shallow copy shares the list)
         future, rates = [], [self.delta_dot_end]    # impulses [N s]; rates [m/s] at the step ends
         for j in range(1, _WITHHOLD_HORIZON + 1):
             out = StepOutcome()

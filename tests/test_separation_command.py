@@ -61,10 +61,12 @@ def test_bisection_through_cosimulation_agrees_with_the_exact_separation(catalog
     # the bracket ends at max(1e-5 m, 1e-4 S) = 1.4e-5 m; the co-simulation's own position error
     # before the first impact is 3e-5 m on El Centro (docs/accuracy.md): 1e-4 m covers both
     assert bisected.separation_m == pytest.approx(exact.separation_m, abs=1e-4)
-    # peaks from the sampled uncoupled run: at most (w h)^2 / 8 low, 0.2 % at h = 10 ms, T = 0.5 s
+    # peaks of the uncoupled co-simulation run: building.fmu's in-step peaks (x_peak, the final
+    # read: its long steps keep few rows), exact for the record across knots; steps inside one
+    # record interval hold the ground's mean there.  Measured against the exact modal peaks:
+    # -1.2e-7 (left) and +9.1e-7 (right) relative; 5e-6 leaves room for round-off of other platforms
     for k in range(2):
-        assert bisected.estimate.peaks_history[k] == pytest.approx(exact.estimate.peaks_history[k], rel=2e-3)
-        assert bisected.estimate.peaks_history[k] <= exact.estimate.peaks_history[k] * (1 + 1e-9)
+        assert bisected.estimate.peaks_history[k] == pytest.approx(exact.estimate.peaks_history[k], rel=5e-6)
 
 
 def test_bisection_brackets_a_known_threshold():

@@ -139,10 +139,10 @@ class _Runner:
 def contacts_at(result, level: str) -> int:
     """Touches of the contact instance ``level`` in a run: impacts plus grazes, or 1 if its largest
     force is positive while its counters say none (a touch still in progress at the end)."""
-    count = int(result[column(level, "impacts")][-1])
-    if result.has(column(level, "grazes")):
-        count += int(result[column(level, "grazes")][-1])
-    if count == 0 and result.has(column(level, "F_max")) and result[column(level, "F_max")][-1] > 0.0:
+    # the final read (every output, whatever the run recorded)
+    count = int(result.value_at_end(column(level, "impacts")))
+    count += int(result.value_at_end(column(level, "grazes")))
+    if count == 0 and result.value_at_end(column(level, "F_max")) > 0.0:
         count = 1
     return count
 
@@ -274,11 +274,15 @@ def _simulated_estimate(runner: _Runner, uncoupled, scene: Scene, level, left, r
 
 
 def _peak(result, building: str, floor: int) -> float:
-    """Peak |x| of a floor: the building's in-step peak output when it has one, else the samples."""
+    """Peak |x| of a floor: the building's in-step peak output at the end when it has one, else
+    the largest of every step's end (the run's tracked peaks; long steps keep few rows)."""
     name = column(building, element_name("x_peak", floor))
-    if result.has(name):
-        return float(result[name][-1])
-    return float(np.max(np.abs(result[column(building, element_name("x", floor))])))
+    if result.known(name):
+        return result.value_at_end(name)
+    x = column(building, element_name("x", floor))
+    if x in result.peaks:
+        return result.peaks[x][0]
+    return float(np.max(np.abs(result[x])))
 
 
 def bisect_separation(touches: Callable[[float], bool], sampled: Separation) -> Separation:

@@ -232,16 +232,18 @@ LOOPS_PLOTTED = 6
 def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
     """Force-penetration loops of the largest impacts, each from its own trajectory inside the
     steps (:func:`cosim.master.impacts.replay_contact`: the contact FMU's arithmetic replayed on
-    the recorded inputs).  A history recorded at fewer points than the steps cannot be replayed:
-    then the step means against the end-of-step penetration, labelled as such."""
+    the steps it took, which the run logs whatever it records).  A result without that log (not
+    made by :func:`cosim.master.simulate.simulate`) draws the recorded step means against the
+    end-of-step penetration, labelled as such."""
     from .impacts import replay_contact
 
     fig, ax = plt.subplots(figsize=(6, 5))
     loops, fallback = [], []
     for c in result.scene.contacts:
-        trajectories = replay_contact(result, c.name) if result.has(f"{c.name}.delta") else None
+        trajectories = replay_contact(result, c.name)
         if trajectories is None:
-            fallback.append(c.name)
+            if result.has(f"{c.name}.delta") and result.has(f"{c.name}.F"):
+                fallback.append(c.name)
         else:
             loops += trajectories
     for t in sorted(loops, key=lambda t: t.peak_force, reverse=True)[:LOOPS_PLOTTED]:

@@ -37,6 +37,7 @@ from .names import column, element_name
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .steplog import ContactSteps, ContactWindows
 
 
 @dataclass(frozen=True)
@@ -102,6 +103,12 @@ class SimulationResult:
     impact_rows: list[dict[str, Any]] | None = None
     #: contact -> the contact FMU's t_onset of its first impact (s), read with its step
     first_onsets: dict[str, float] = field(default_factory=dict)
+    #: contact -> every fmi2DoStep its FMU took, with its inputs (:mod:`cosim.master.steplog`: what
+    #: the replays of :mod:`cosim.master.impacts` step; empty: not logged)
+    contact_steps: dict[str, "ContactSteps"] = field(default_factory=dict)
+    #: the steps that hold a contact force, with the pounding buildings' states and inputs
+    #: (:class:`cosim.master.steplog.ContactWindows`; None: not logged)
+    contact_windows: "ContactWindows | None" = None
 
     @property
     def energy_residual_J(self) -> float:
