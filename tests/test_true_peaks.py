@@ -52,15 +52,17 @@ def test_the_reference_peaks_bound_its_own_dense_output(default_run):
 
 def test_the_replayed_contacts_are_the_fmus(default_run):
     """The master's replay of pounding.fmu (impacts.replay_contact) finds the FMU's contacts with
-    its peak forces: the replay is the FMU's own deterministic arithmetic on recorded inputs."""
+    its peak forces: the replay is the FMU's own deterministic arithmetic on the steps it took
+    (logged with their inputs: cosim.master.steplog), dormant contacts and long steps included."""
     result = default_run.result
+    assert result.stats["dormant_steps"] > 0 and result.stats["long_steps"] > 0
     rows = impact_table(result)
     trajectories = replay_contact(result, "pounding_3")
     assert len(trajectories) == len(rows) == 11
     for trajectory, row in zip(trajectories, rows):
-        # 1e-9: the step lengths recovered from the recorded times differ from the master's in
-        # the last bits; the resolver's adaptive internal steps amplify that to ~1e-12
-        assert trajectory.t_onset == pytest.approx(row["t_onset_s"], rel=1e-9)
+        # the same arithmetic on the same doubles (t, h and the inputs as the FMU got them)
+        assert trajectory.t_onset == row["t_onset_s"]
+        assert trajectory.F_peak == row["peak_force_N"]
         # the sampled points lie within one internal step of the refined peak F_peak (measured
         # 3.9e-3 below it at the smallest, 0.26 MN, impact; the others closer)
         assert trajectory.peak_force == pytest.approx(row["peak_force_N"], rel=5e-3)
@@ -71,14 +73,13 @@ def test_the_replayed_contacts_are_the_fmus(default_run):
 #: the issue's bounds: displacement and drift 0.2 %; acceleration 1 %, except at the pounding
 #: floors (below)
 X_DRIFT_TOLERANCE = 2e-3
-#: measured on a loaded machine (deterministic): the headline peak accelerations are the pounding
-#: floors' impact spikes, 1.46 % above the reference on the default scene, 1.23 % on Kobe, 0.98 % on
-#: Kasai-Maison.  Not the location inside the step: the co-simulation's impact itself differs
-#: (pounding.fmu resolves it with the floors' accelerations extrapolated over the step: on the
-#: default scene's largest impact its force peaks 1.2 ms later than the reference's, 0.14 % lower,
-#: and the storeys' reaction at the later instant is smaller).  Without the spikes, the building's
-#: own in-step peak would be 8 % low.
-SPIKE_TOLERANCE = 0.016
+#: the issue's 1 %.  Measured (deterministic): the headline peak accelerations, the pounding floors'
+#: impact spikes, are +0.07 % / -0.26 % (default, left / right), -0.39 % / -0.38 % (Kobe), -0.50 % /
+#: +0.45 % (Kasai-Maison) off the reference.  They were 1.0-1.6 % high while the contact force
+#: inside a step began at its first internal point (continued flat back to the step start, where
+#: the storeys' own push is larger) instead of at its value there: impacts._force_polyline.
+#: Without the spikes, the building's own in-step peak would be 8 % low.
+SPIKE_TOLERANCE = 0.01
 
 
 @pytest.mark.parametrize("name", ["default", "kobe", "kasai_maison"])

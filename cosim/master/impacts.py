@@ -157,18 +157,13 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
     for level in scene.levels:
         if not bool(scene.instance(level.instance).value("resolve_impacts")):
             continue
-        trajectories = replay_contact(result, level.instance) or []
-        times = [tr.time for tr in trajectories] + [np.array([tr.t_peak for tr in trajectories if tr.F_peak > 0.0])]
-        forces = [tr.force for tr in trajectories] + [np.array([tr.F_peak for tr in trajectories if tr.F_peak > 0.0])]
-        tp, fp = np.concatenate(times), np.concatenate(forces)
+        force_t, force = _force_polyline(replay_contact(result, level.instance) or [])
         # the logged step (t0, t1] holding each point; a point in no logged step acted on no building
-        r = np.minimum(np.searchsorted(t1, tp, side="left"), t0.size - 1)
-        inside = (tp <= t1[r]) & (tp >= t0[r])
-        tp, fp, r = tp[inside], fp[inside], r[inside]
+        r = np.minimum(np.searchsorted(t1, force_t, side="left"), t0.size - 1)
+        inside = (force_t <= t1[r]) & (force_t >= t0[r])
+        tp, fp, r = force_t[inside], force[inside], r[inside]
         if not tp.size:
             continue
-        order = np.argsort(tp, kind="stable")
-        tp, fp, r = tp[order], fp[order], r[order]
         F_column = column(level.instance, "F")
         mine = windows.at_start(F_column) if late else windows.at_end(F_column)
         w = np.clip((tp - t0[r]) / (t1[r] - t0[r]), 0.0, 1.0)
@@ -186,7 +181,7 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
                 # the exact in-step values replace the estimate (which overshoots by up to 1.5 %:
                 # the structure's part is not linear over a step that holds an impact)
                 model = shear_building(spec)
-                value = max(_exact_in_step(windows, model, building, floor, int(k), tp[r == k], fp[r == k],
+                value = max(_exact_in_step(windows, model, building, floor, int(k), force_t, force,
                                            sign, float(mine[k]), held[building][k])
                             for k in np.unique(r[quick >= (1.0 - _CANDIDATE_MARGIN) * value]))
             floors = out.setdefault(building, {})
@@ -201,21 +196,43 @@ def _is_linear(spec) -> bool:
         return True
 
 
-def _exact_in_step(windows, model, building: str, floor: int, k: int, tp: np.ndarray, fp: np.ndarray,
+def _force_polyline(trajectories: list[ContactTrajectory]) -> tuple[np.ndarray, np.ndarray]:
+    """A contact's force (N) against time (s) over a run, linear between its points: each contact
+    from 0 at its onset through the replayed points (the last is 0 at separation) with its
+    refined peak ``F_peak`` at ``t_peak``; 0 outside the contacts."""
+    times, forces = [], []
+    for tr in trajectories:
+        times += [np.array([tr.t_onset]), tr.time]
+        forces += [np.zeros(1), tr.force]
+        if tr.F_peak > 0.0:
+            times.append(np.array([tr.t_peak]))
+            forces.append(np.array([tr.F_peak]))
+    if not times:
+        return np.zeros(0), np.zeros(0)
+    t, f = np.concatenate(times), np.concatenate(forces)
+    order = np.argsort(t, kind="stable")
+    return t[order], f[order]
+
+
+def _exact_in_step(windows, model, building: str, floor: int, k: int, force_t: np.ndarray, force: np.ndarray,
                    sign: float, mine_held: float, f_held: np.ndarray) -> float:
     """Largest |absolute acceleration| of ``floor`` over the logged step ``k``: the linear
     building from its state at the step start, the contact force (sign ``sign`` on this floor)
-    through the points (tp, fp) in place of its held mean ``mine_held`` (N), the other held
-    forces ``f_held`` (N per floor), the ground acceleration the building was given."""
+    along its polyline (force_t, force) in place of its held mean ``mine_held`` (N), the other
+    held forces ``f_held`` (N per floor), the ground acceleration the building was given."""
     t0, t1 = float(windows.t0[k]), float(windows.t1[k])
     n = model.n
     floors = range(1, n + 1)
     u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
     v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
-    g_times, g_values = windows.inputs[building].ground(k)
-    # the contact's force through its points; at the step's ends continued flat from the nearest
+    g_times, g_values = windows.inputs[building].ground(k, t0, t1)
+    # the contact's force inside the step: its polyline, cut at the step's ends (a point on an
+    # end belongs to both steps)
+    inside = (force_t > t0) & (force_t < t1)
+    tp = force_t[inside]
     knots_t = np.concatenate(([t0], tp, [t1]))
-    knots_f = np.concatenate(([fp[0]], fp, [fp[-1]]))
+    knots_f = np.concatenate(([np.interp(t0, force_t, force, 0.0, 0.0)], force[inside],
+                              [np.interp(t1, force_t, force, 0.0, 0.0)]))
     K, C, minv = model.K, model.C, 1.0 / model.masses
     base = f_held.copy()
     base[floor - 1] -= sign * mine_held

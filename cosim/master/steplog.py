@@ -124,16 +124,16 @@ class BuildingInputs:
                 out[:, int(name[2:-1]) - 1] = self.values[:, j]
         return out
 
-    def ground(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Ground acceleration (m/s^2) step ``k`` was given, as a polyline ``(times, values)``:
-        the knots, or the held ``ag`` at both ends."""
+    def ground(self, k: int, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """Ground acceleration (m/s^2) step ``k`` (from ``t0`` to ``t1``, s) was given, as a
+        polyline ``(times, values)``: the knots, or the held ``ag`` at both ends."""
         count = int(self.knots[k])
         row = self.values[k]
         if count >= 2:
             o = self.knot_offset
             return row[o:o + 2 * count:2].copy(), row[o + 1:o + 2 * count:2].copy()
         ag = float(row[self.names.index("ag")]) if "ag" in self.names[:self.knot_offset] else 0.0
-        return np.array([-np.inf, np.inf]), np.array([ag, ag])
+        return np.array([t0, t1]), np.array([ag, ag])
 
 
 @dataclass(frozen=True)
