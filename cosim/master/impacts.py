@@ -12,8 +12,8 @@ in it):
   same parameters (:func:`cosim.master.models.contact_law`) takes every logged step with the
   same ``delta = x1 - x2 - gap`` and ``delta_dot = v1 - v2`` (computed as the FMU does) and step
   length; it records every accepted internal point.  The resolver is deterministic, so the
-  replay is the FMU's own trajectory: its contacts, onsets, peak forces and energies are the
-  FMU's outputs (tested to 1e-9).  Cost: the contact FMU's own arithmetic without the FMI calls.
+  replay is the FMU's own trajectory: its contacts, onsets and peak forces are the FMU's
+  outputs bit for bit (tests/test_step_log.py).  Cost: the contact FMU's own arithmetic without the FMI calls.
 * ``resolve_impacts = false``: a fresh :class:`fmu_src.plain_contact.PlainContact` takes the
   same steps: the force law at each step start, held over the step.
 
