@@ -4,8 +4,10 @@
 coupling strategy (:mod:`cosim.master.coupling`) from t = 0 to the stop time, checks every
 accepted step with the stability guard (:mod:`cosim.master.guard`), keeps what
 :mod:`cosim.master.recording` says (rows at the output interval, peaks and impact onsets of
-every step, the final values) and returns a :class:`~cosim.master.results.SimulationResult`
-(history, peaks, final values and cost).
+every step, the final values), logs what the replays of the true peaks need
+(:mod:`cosim.master.steplog`: every step each contact FMU took, the buildings around contacts)
+and returns a :class:`~cosim.master.results.SimulationResult` (history, peaks, final values,
+logs and cost).
 """
 from __future__ import annotations
 
