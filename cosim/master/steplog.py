@@ -198,11 +198,7 @@ class ContactWindowLog:
         self._forces = sum(1 for c in self.columns if c.endswith(".F"))
         self._buildings = _pounding_buildings(system) if self._forces else []
         self._rows: list[tuple] = []
-        self._prev = system.y[self._index]
-
-    def start(self) -> None:
-        """The values at t0 (after initialisation)."""
-        self._prev = self.system.y[self._index]
+        self._prev = system.y[self._index]      # the values at t0: made after initialisation
 
     def track(self, t0: float, t1: float) -> None:
         """The step ``[t0, t1]`` was accepted."""
