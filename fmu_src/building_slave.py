@@ -34,6 +34,7 @@ E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kineti
 from __future__ import annotations
 
 import copy
+import functools
 import math
 
 import numpy as np
@@ -60,7 +61,9 @@ _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 # doubles to every FMU; the margin only absorbs a host that rounds times differently).
 _KNOT_TIME_TOL = 1e-9
 # Outputs computed from the state when read (none of them is needed to advance the state).
-_DERIVED = ("V", "mu", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak")
+# (rows of one block, N_MAX wide, filled at the first read after a step: x_peak, drift_peak and
+# a_peak are the state's running peaks in one copy)
+_DERIVED = ("V", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
 
 
 class Building(Fmi2Slave):
@@ -161,27 +164,37 @@ class Building(Fmi2Slave):
             return super()._element_getter(attr, idx)
 
         def get():
-            if self._state is None or idx >= self._n:
+            if self._state is None:
                 return 0.0
             return float(self._derived()[attr][idx])
         return get
 
+    def _array_reader(self, attr):
+        if attr not in _DERIVED:
+            return functools.partial(getattr, self, attr)
+        return functools.partial(self._derived_array, attr)
+
+    def _derived_array(self, attr: str) -> np.ndarray:
+        """A derived output whole (N_MAX elements, 0 above n_storeys), as its element getters read it."""
+        if self._state is None:
+            return np.zeros(N_MAX)
+        return self._derived()[attr]
+
     def _derived(self) -> dict[str, np.ndarray]:
-        cached = self._derived_cache
-        if cached is None:
-            state, integ = self._state, self._integrator
+        """The derived outputs of the current state by name, rows of one block N_MAX wide (0 above
+        n_storeys), filled at the first read after a step (readers copy what they read at once)."""
+        if self._derived_cache is None:
+            state, integ, n = self._state, self._integrator, self._n
             integ.resolve_peaks(state, self.cost)      # the in-step peak searches left to do
-            heights = self.storey_height[:self._n]
-            cached = self._derived_cache = {
-                "V": integ.storey_shear(state),
-                "drift_residual": integ.residual_drift(state),
-                "x_peak": state.peak_x,
-                "drift_peak": state.peak_drift,
-                "a_peak": state.peak_accel,
-                "drift_ratio_peak": state.peak_drift / heights,
-                "mu": state.peak_drift * self._inv_yield_drift,
-            }
-        return cached
+            block = self._derived_block
+            block[0, :n] = integ.storey_shear(state)
+            if integ.hysteresis.inelastic:              # a linear storey has no residual drift: 0
+                block[1, :n] = integ.residual_drift(state)
+            block[2:5, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
+            np.divide(state.peak_drift, self.storey_height[:n], out=block[5, :n])
+            np.multiply(state.peak_drift, self._inv_yield_drift, out=block[6, :n])
+            self._derived_cache = self._derived_rows
+        return self._derived_cache
 
     def _set_fmu_state(self, state):
         super()._set_fmu_state(state)
@@ -222,6 +235,8 @@ class Building(Fmi2Slave):
         with np.errstate(divide="ignore"):
             self._inv_yield_drift = np.where(fy > 0.0, building.stiffnesses / np.where(fy > 0.0, fy, 1.0), 0.0)
         self._y = np.zeros(3 * n + 1)  # work buffer [u; v; ag; f]
+        self._derived_block = np.zeros((len(_DERIVED), N_MAX))
+        self._derived_rows = dict(zip(_DERIVED, self._derived_block))
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
         self._steps = {}

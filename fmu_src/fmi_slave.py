@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import functools
 import math
 import operator
 import sys
@@ -75,6 +76,9 @@ MAX_STEP = 1e6
 #: a step must also change the time: h >= TIME_RESOLUTION |t| (t + h distinct from t, with
 #: six bits to spare)
 TIME_RESOLUTION = 64 * 2.220446049250313e-16
+#: value-reference lists whose fmi2GetReal/fmi2SetReal plan an instance remembers (a master
+#: uses a handful, the same every step); beyond that the plans are dropped and rebuilt
+MAX_ACCESS_PLANS = 64
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,12 @@ def snapshot(value: Any) -> Any:
     if own is not None:
         return own()
     return copy.deepcopy(value)
+
+
+def _attrgetter_one(name: str) -> Callable[[Any], tuple]:
+    """``operator.attrgetter`` of one name, returning a 1-tuple as it does for several."""
+    get = operator.attrgetter(name)
+    return lambda obj: (get(obj),)
 
 
 class SlaveError(Exception):
@@ -297,6 +307,102 @@ class SlaveBase(Fmi2Slave):
         scalars = [a for _, a, i in self._real_outputs if i is None]
         self._scalar_outputs = operator.attrgetter(*scalars) if len(scalars) > 1 else None
         self._array_outputs = sorted({a for _, a, i in self._real_outputs if i is not None})
+        self._declared = {v.name: v for v in self.VARIABLES}
+        self._read_plans: dict[tuple[int, ...], list] = {}
+        self._write_plans: dict[tuple[int, ...], list] = {}
+
+    # -- fmi2GetReal / fmi2SetReal: one plan per value-reference list -----------------------------
+    # pythonfmu calls one getter or setter per value (about 0.5 us each: a dict look-up, a type
+    # test, a lambda, getattr, a numpy scalar); a master reads and writes the same lists at every
+    # step (building.fmu: 40-62 outputs, 33 knots and their times).  So each list is turned once
+    # into runs of consecutive elements of one array, read or written as one slice; scalars and
+    # any variable whose access a subclass customises keep their own getter or setter.  The
+    # values are the same doubles as pythonfmu's path gives (tests/test_fmi_layer.py).
+    def get_real(self, vrs):
+        key = tuple(vrs)
+        plan = self._read_plans.get(key)
+        if plan is None:
+            plan = self._access_plan(key, write=False)
+            if plan is None:
+                return super().get_real(vrs)     # not every one a Real: pythonfmu's TypeError
+        out = []
+        for reader, start, stop in plan:
+            if start is not None:
+                out.extend(reader()[start:stop].tolist())
+            elif stop is not None:             # consecutive plain scalars: one attrgetter
+                out.extend(map(float, reader(self)))
+            else:
+                out.append(float(reader()))
+        return out
+
+    def set_real(self, vrs, values):
+        key = tuple(vrs)
+        plan = self._write_plans.get(key)
+        if plan is None:
+            plan = self._access_plan(key, write=True)
+            if plan is None:
+                return super().set_real(vrs, values)
+        for attr, setter, start, stop, first, last in plan:
+            if setter is not None:
+                setter(values[first])
+            else:
+                getattr(self, attr)[start:stop] = values[first:last]
+        return None
+
+    def _access_plan(self, key: tuple[int, ...], write: bool) -> list | None:
+        """The runs of ``key`` (see above), remembered; None if a value reference is not a Real."""
+        plans = self._write_plans if write else self._read_plans
+        runs: list[list] = []
+        for position, vr in enumerate(key):
+            var = self.vars.get(vr)
+            if not isinstance(var, Real):
+                return None
+            decl = self._declared.get(var.name)
+            attr, idx = (decl.attribute, decl.index) if decl is not None else (None, None)
+            whole = None
+            if idx is not None:
+                if write:
+                    whole = decl.causality == "input" and self._plain_element_setter(attr)
+                else:
+                    whole = self._array_reader(attr)
+            if write and not whole and var.setter is None:
+                return None                    # pythonfmu's own error for a variable without a setter
+            plain = not write and idx is None and attr is not None and self._scalar_getter(attr) is None
+            last = runs[-1] if runs else None
+            if whole and last is not None and last[0] == attr and last[3] == idx:
+                last[3] = idx + 1          # the next element of the same array: extend the run
+                last[5] = position + 1
+            elif whole:
+                runs.append([attr, whole, idx, idx + 1, position, position + 1])
+            elif plain and last is not None and isinstance(last[0], list):
+                last[0].append(attr)       # the next plain scalar attribute
+            elif plain:
+                runs.append([[attr], None, None, True, position, position + 1])
+            else:
+                runs.append([attr, var.setter if write else var.getter, None, None, position, position + 1])
+        if len(plans) >= MAX_ACCESS_PLANS:
+            plans.clear()
+        if write:
+            plan = [(attr, None if start is not None else f, start, stop, first, last_)
+                    for attr, f, start, stop, first, last_ in runs]
+        else:
+            plan = [(f, start, stop) if not isinstance(attr, list)
+                    else (operator.attrgetter(*attr) if len(attr) > 1 else _attrgetter_one(attr[0]), None, True)
+                    for attr, f, start, stop, _, _ in runs]
+        plans[key] = plan
+        return plan
+
+    def _array_reader(self, attr: str) -> Callable[[], np.ndarray] | None:
+        """A function giving the array ``attr`` whole, each element as its getter gives it (for
+        :meth:`get_real`), or None to call the element getters one by one.  A subclass that
+        overrides :meth:`_element_getter` overrides this too (until then: element by element)."""
+        if type(self)._element_getter is not SlaveBase._element_getter:
+            return None
+        return functools.partial(getattr, self, attr)
+
+    def _plain_element_setter(self, attr: str) -> bool:
+        """True if setting an element of the input array ``attr`` only stores the value."""
+        return type(self)._element_setter is SlaveBase._element_setter
 
     # -- declaration ---------------------------------------------------------------------------
     def _register(self, var: Variable) -> None:
