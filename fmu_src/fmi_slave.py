@@ -190,9 +190,36 @@ def snapshot(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
-def _attrgetter_one(name: str) -> Callable[[Any], tuple]:
-    """``operator.attrgetter`` of one name, returning a 1-tuple as it does for several."""
-    get = operator.attrgetter(name)
+@dataclass(frozen=True)
+class _AccessPlan:
+    """How one fmi2GetReal/fmi2SetReal value-reference list is served (:meth:`SlaveBase.get_real`).
+
+    ``arrays``: per array, ``(reader or attribute name, element selector, position selector)``
+    (a selector is a slice where the numbers form an arithmetic progression, else a list);
+    ``scalars``: runs of plain scalar attributes, ``(attrgetter, slice of positions)``;
+    ``single``: ``(getter or setter, position)`` of every other variable.
+    """
+
+    arrays: tuple
+    scalars: tuple
+    single: tuple
+
+
+def _selector(numbers: list[int]) -> slice | list[int]:
+    """A slice selecting ``numbers`` (ascending, evenly spaced), or the list itself."""
+    if len(numbers) == 1:
+        return slice(numbers[0], numbers[0] + 1)
+    step = numbers[1] - numbers[0]
+    if step > 0 and all(b - a == step for a, b in zip(numbers, numbers[1:])):
+        return slice(numbers[0], numbers[-1] + 1, step)
+    return list(numbers)
+
+
+def _attrgetter(names: list[str]) -> Callable[[Any], tuple]:
+    """``operator.attrgetter`` of the names, returning a tuple even for one."""
+    if len(names) > 1:
+        return operator.attrgetter(*names)
+    get = operator.attrgetter(names[0])
     return lambda obj: (get(obj),)
 
 
@@ -314,10 +341,12 @@ class SlaveBase(Fmi2Slave):
     # -- fmi2GetReal / fmi2SetReal: one plan per value-reference list -----------------------------
     # pythonfmu calls one getter or setter per value (about 0.5 us each: a dict look-up, a type
     # test, a lambda, getattr, a numpy scalar); a master reads and writes the same lists at every
-    # step (building.fmu: 40-62 outputs, 33 knots and their times).  So each list is turned once
-    # into runs of consecutive elements of one array, read or written as one slice; scalars and
-    # any variable whose access a subclass customises keep their own getter or setter.  The
-    # values are the same doubles as pythonfmu's path gives (tests/test_fmi_layer.py).
+    # step (building.fmu: 12-62 outputs; 33 knot times and values, interleaved).  So each list is
+    # turned once into a plan (:class:`_AccessPlan`): the elements of one array are read or
+    # written together, through a slice where they form one (the interleaved knots: two strided
+    # slices); consecutive plain scalars are read by one attrgetter; any variable whose access a
+    # subclass customises keeps its own getter or setter.  The values are the doubles pythonfmu's
+    # path gives (tests/test_access_plans.py).
     def get_real(self, vrs):
         key = tuple(vrs)
         plan = self._read_plans.get(key)
@@ -325,14 +354,18 @@ class SlaveBase(Fmi2Slave):
             plan = self._access_plan(key, write=False)
             if plan is None:
                 return super().get_real(vrs)     # not every one a Real: pythonfmu's TypeError
-        out = []
-        for reader, start, stop in plan:
-            if start is not None:
-                out.extend(reader()[start:stop].tolist())
-            elif stop is not None:             # consecutive plain scalars: one attrgetter
-                out.extend(map(float, reader(self)))
+        out = [0.0] * len(key)
+        for read, index, where in plan.arrays:
+            values = read()[index].tolist()
+            if type(where) is slice:
+                out[where] = values
             else:
-                out.append(float(reader()))
+                for position, value in zip(where, values):
+                    out[position] = value
+        for getter, where in plan.scalars:
+            out[where] = map(float, getter(self))
+        for getter, position in plan.single:
+            out[position] = float(getter())
         return out
 
     def set_real(self, vrs, values):
@@ -342,53 +375,55 @@ class SlaveBase(Fmi2Slave):
             plan = self._access_plan(key, write=True)
             if plan is None:
                 return super().set_real(vrs, values)
-        for attr, setter, start, stop, first, last in plan:
-            if setter is not None:
-                setter(values[first])
-            else:
-                getattr(self, attr)[start:stop] = values[first:last]
+        for setter, position in plan.single:
+            setter(values[position])
+        for attr, index, where in plan.arrays:
+            getattr(self, attr)[index] = values[where] if type(where) is slice else [values[p] for p in where]
         return None
 
-    def _access_plan(self, key: tuple[int, ...], write: bool) -> list | None:
-        """The runs of ``key`` (see above), remembered; None if a value reference is not a Real."""
-        plans = self._write_plans if write else self._read_plans
-        runs: list[list] = []
+    def _access_plan(self, key: tuple[int, ...], write: bool) -> "_AccessPlan | None":
+        """The plan of ``key`` (see above), remembered; None to leave the call to pythonfmu (a value
+        reference that is not a Real, one without a setter, or one given twice in a write)."""
+        if write and len(set(key)) < len(key):
+            return None                    # pythonfmu's order decides which value stays
+        arrays: dict[str, tuple[Any, list[int], list[int]]] = {}
+        scalars: list[list] = []           # runs of consecutive plain scalars: [names, first, stop]
+        single: list[tuple[Callable, int]] = []
         for position, vr in enumerate(key):
             var = self.vars.get(vr)
             if not isinstance(var, Real):
                 return None
             decl = self._declared.get(var.name)
             attr, idx = (decl.attribute, decl.index) if decl is not None else (None, None)
-            whole = None
+            access = None
             if idx is not None:
                 if write:
-                    whole = decl.causality == "input" and self._plain_element_setter(attr)
+                    access = attr if decl.causality == "input" and self._plain_element_setter(attr) else None
                 else:
-                    whole = self._array_reader(attr)
-            if write and not whole and var.setter is None:
-                return None                    # pythonfmu's own error for a variable without a setter
-            plain = not write and idx is None and attr is not None and self._scalar_getter(attr) is None
-            last = runs[-1] if runs else None
-            if whole and last is not None and last[0] == attr and last[3] == idx:
-                last[3] = idx + 1          # the next element of the same array: extend the run
-                last[5] = position + 1
-            elif whole:
-                runs.append([attr, whole, idx, idx + 1, position, position + 1])
-            elif plain and last is not None and isinstance(last[0], list):
-                last[0].append(attr)       # the next plain scalar attribute
-            elif plain:
-                runs.append([[attr], None, None, True, position, position + 1])
+                    access = self._array_reader(attr)
+            if access is not None:
+                group = arrays.setdefault(attr, (access, [], []))
+                group[1].append(idx)
+                group[2].append(position)
+            elif write:
+                if var.setter is None:
+                    return None            # pythonfmu's own error for a variable without a setter
+                single.append((var.setter, position))
+            elif attr is not None and idx is None and self._scalar_getter(attr) is None:
+                if scalars and scalars[-1][2] == position:
+                    scalars[-1][0].append(attr)
+                    scalars[-1][2] = position + 1
+                else:
+                    scalars.append([[attr], position, position + 1])
             else:
-                runs.append([attr, var.setter if write else var.getter, None, None, position, position + 1])
+                single.append((var.getter, position))
+        plan = _AccessPlan(
+            arrays=tuple((access, _selector(index), _selector(where)) for access, index, where in arrays.values()),
+            scalars=tuple((_attrgetter(names), slice(first, stop)) for names, first, stop in scalars),
+            single=tuple(single))
+        plans = self._write_plans if write else self._read_plans
         if len(plans) >= MAX_ACCESS_PLANS:
             plans.clear()
-        if write:
-            plan = [(attr, None if start is not None else f, start, stop, first, last_)
-                    for attr, f, start, stop, first, last_ in runs]
-        else:
-            plan = [(f, start, stop) if not isinstance(attr, list)
-                    else (operator.attrgetter(*attr) if len(attr) > 1 else _attrgetter_one(attr[0]), None, True)
-                    for attr, f, start, stop, _, _ in runs]
         plans[key] = plan
         return plan
 

@@ -75,11 +75,13 @@ def test_building_reads_equal_pythonfmus(model):
 def test_ground_knots_read_equal_pythonfmus():
     g = ground()
     outputs = real_refs(g, "output")
+    interleaved = vr(g, *[f"{a}[{k}]" for k in range(1, 17) for a in ("t_knot", "ag_knot")])
     t = 1.0
     for h in (0.01, 0.13, 0.3, 0.2):
         g.do_step(t, h)
         t += h
-        fast = g.get_real(outputs)       # the knots are computed at this first read
+        assert g.get_real(interleaved) == Fmi2Slave.get_real(g, interleaved)   # the first read
+        fast = g.get_real(outputs)
         assert fast == Fmi2Slave.get_real(g, outputs)
     times, _ = step_knots(g._record, t - 0.2, t)
     assert fast[outputs.index(vr(g, "t_knot[2]")[0])] == times[1]
@@ -89,7 +91,10 @@ def test_writes_equal_pythonfmus_and_refusals_stay():
     fast, slow = building(name="fast"), building(name="slow")
     inputs = real_refs(fast, "input")
     rng = np.random.default_rng(2)
-    for refs in (inputs, inputs[::-1], list(rng.permutation(inputs)[:30])):
+    # what issue 17's master writes: ag, a force, then knot times and values interleaved
+    interleaved = vr(fast, "ag", "F[3]", *[f"{a}[{k}]" for k in range(1, 34) for a in ("t_knot", "ag_knot")])
+    duplicated = vr(fast, "F[1]", "F[2]", "F[1]")      # the last value stays, as in pythonfmu
+    for refs in (inputs, inputs[::-1], list(rng.permutation(inputs)[:30]), interleaved, duplicated):
         values = list(rng.normal(size=len(refs)))
         fast.set_real(refs, values)
         Fmi2Slave.set_real(slow, refs, values)
