@@ -121,6 +121,14 @@ class BuildingState:
     def copy(self) -> "BuildingState":
         return copy.deepcopy(self)
 
+    def shallow(self) -> "BuildingState":
+        """A copy sharing the arrays (the integrators replace a state's arrays, never change them
+        in place) with a list of deferred peak searches of its own: what a refused step restores."""
+        new = object.__new__(BuildingState)
+        new.__dict__.update(self.__dict__)
+        new.pending = list(self.pending)
+        return new
+
     def snapshot(self) -> "BuildingState":
         """A copy as independent as :meth:`copy`, for an FMU state (:func:`fmu_src.fmi_slave.snapshot`).
 
@@ -205,10 +213,13 @@ class BuildingIntegrator:
         """``M^-1 (f - C v - D' V)`` (m/s^2)."""
         return (np.asarray(force, float) - self.C @ state.v - _floor_forces(self.storey_shear(state))) / self.masses
 
-    def response(self, state: BuildingState, force):
-        """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes)."""
+    def response(self, state: BuildingState, force, acceleration: bool = True):
+        """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes);
+        ``a`` is None with ``acceleration=False`` (a caller that computes it its own way)."""
         d = _drift(state.u)
         V, strain = self._shear_and_strain(state, d)
+        if not acceleration:
+            return d, V, None, strain
         a = (force - self.C @ state.v - _floor_forces(V)) / self.masses
         return d, V, a, strain
 
@@ -351,20 +362,26 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         cost = StepCost()
         lengths = np.diff(times)
-        idx = np.flatnonzero(lengths > 0.0)          # equal times: a jump, no time passes
+        idx = (lengths > 0.0).nonzero()[0]           # equal times: a jump, no time passes
         count = idx.size
         _, cfg, elastic, yielding = self._mode_facts(state.mode)
         inelastic = self.hysteresis.inelastic
         p = self._net_force(state, force)
         size = 3 * n + 2
         Y = np.empty((count, size))
-        Y[:, 2 * n] = ag[idx]
-        Y[:, 2 * n + 1] = (ag[idx + 1] - ag[idx]) / lengths[idx]
+        if count == lengths.size:                    # no jump: slices, the same arithmetic
+            Y[:, 2 * n] = ag[:-1]
+            Y[:, 2 * n + 1] = (ag[1:] - ag[:-1]) / lengths
+            positive = lengths
+        else:
+            Y[:, 2 * n] = ag[idx]
+            Y[:, 2 * n + 1] = (ag[idx + 1] - ag[idx]) / lengths[idx]
+            positive = lengths[idx]
         Y[:, 2 * n + 2:] = p
         maps = []
         groups: dict[int, list[int]] = {}         # intervals by map (lengths equal to round-off share one)
         by_length = {}
-        for j, L in enumerate(lengths[idx].tolist()):
+        for j, L in enumerate(positive.tolist()):
             smap = by_length.get(L)
             if smap is None:
                 smap = by_length[L] = cfg.segment_map(L)
@@ -384,7 +401,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         for js in groups.values():
             smap = maps[js[0]]
             rows = 6 * n + smap.scan.shape[0]
-            Yg = Y[js]
+            # the rows of the group, as a slice where they are consecutive (a view, not a copy)
+            Yg = Y[js[0]:js[-1] + 1] if js[-1] - js[0] == len(js) - 1 else Y[js]
             out = Yg @ smap.stacked.T
             bound = np.abs(out[:, rows - 4 * n:rows]) @ smap.change.T
             slopes = np.abs(Yg[:, 2 * n + 1])
@@ -401,7 +419,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             watched = np.abs(out[:, 2 * n:5 * n] + watch_offset)
             # against the peaks at the step start: a superset of what later intervals need
             need = (watched + bound[:, :3 * n] > peaks).any(axis=1)
-            flagged.extend((js[i], out[i, 6 * n:rows]) for i in np.flatnonzero(need))
+            flagged.extend((js[i], out[i, 6 * n:rows]) for i in need.nonzero()[0].tolist())
         cost.segments = count
         cost.cleared = count - len(flagged)
         xtol = EVENT_XTOL * float(times[-1] - times[0])

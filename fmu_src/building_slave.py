@@ -33,7 +33,6 @@ E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kineti
 """
 from __future__ import annotations
 
-import copy
 import functools
 import math
 
@@ -247,7 +246,7 @@ class Building(Fmi2Slave):
     def _publish(self, force) -> None:
         """Outputs from the state (the integrator path and initialisation)."""
         n, state = self._n, self._state
-        drift, V, accel, strain = self._integrator.response(state, force)
+        drift, V, accel, strain = self._integrator.response(state, force, acceleration=not self._legacy)
         self.x[:n] = state.u
         self.v[:n] = state.v
         self.drift[:n] = drift
@@ -310,13 +309,15 @@ class Building(Fmi2Slave):
             return
         n = self._n
         f = self.F[:n]
+        # one reduction instead of a per-element test; a sum that is not finite is looked at closely
+        finite = math.isfinite(f.sum()) or bool(np.isfinite(f).all())
         if knots is None:
             ag = float(self.ag)
-            if not (math.isfinite(ag) and np.isfinite(f).all()):
+            if not (math.isfinite(ag) and finite):
                 raise SlaveError(self._non_finite_input(ag, f))
             times, values = (0.0, step_size), (ag, ag)
         else:
-            if not np.isfinite(f).all():
+            if not finite:
                 raise SlaveError(self._non_finite_input(0.0, f))
             if self._free_mass:
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
@@ -325,8 +326,7 @@ class Building(Fmi2Slave):
         state = self._state
         # what to restore if the step is refused: the integrators replace the state's fields,
         # never change them in place, except the list of deferred peak searches
-        before = copy.copy(state)
-        before.pending = list(state.pending)
+        before = state.shallow()
         try:
             cost = self._integrator.advance(state, times, values, f)
         except ValueError as exc:
@@ -429,7 +429,9 @@ class Building(Fmi2Slave):
                              f"2 <= n_knots <= {KNOT_CAPACITY}")
         times = self.t_knot[:count]
         values = self.ag_knot[:count]
-        if not (np.isfinite(times).all() and np.isfinite(values).all()):
+        # (a sum that is not finite is looked at element by element)
+        if not math.isfinite(float(times.sum()) + float(values.sum())) and not (
+                np.isfinite(times).all() and np.isfinite(values).all()):
             for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
                 bad = np.flatnonzero(~np.isfinite(arr))
                 if bad.size:
@@ -449,5 +451,6 @@ class Building(Fmi2Slave):
                              f"t_knot[{i + 2}] = {times[i + 1]:.9g} s")
         rel[0] = 0.0
         rel[-1] = h
-        np.clip(rel, 0.0, h, out=rel)
+        np.maximum(rel, 0.0, out=rel)    # np.clip's arithmetic without its Python overhead
+        np.minimum(rel, h, out=rel)
         return rel, values.copy()
