@@ -215,9 +215,46 @@ def fmpy_costs() -> None:
             state["i"] += 1
         best = min(timeit.repeat(one_step, number=2000, repeat=5)) / 2000
         print(f"  {model:9s} {len(outputs)} outputs: {1e6 * best:.1f} us per step (wall, best of 5)")
+        if model == "linear":
+            floor(fmu, variables, values, state["i"])
         fmu.terminate()
         fmu.freeInstance()
     exit_process(0)
+
+
+def floor(fmu, variables, values, steps_done: int) -> None:
+    """What pythonfmu (and fmpy's ctypes call) add per FMI call: the same call through the FMU and
+    on an in-process slave of the same parameters and inputs (wall, best of 5)."""
+    import timeit
+
+    b = make(5)
+    x1 = [variables["x[1]"].valueReference]
+    ag_vr = [variables["ag"].valueReference]
+    clock = {"fmu": steps_done, "slave": steps_done}
+
+    def best(f):
+        return 1e6 * min(timeit.repeat(f, number=2000, repeat=5)) / 2000
+
+    def fmu_step():
+        i = clock["fmu"]
+        fmu.setReal(ag_vr, [float(values[i % 4000])])
+        fmu.doStep(0.01 * i, 0.01)
+        clock["fmu"] += 1
+
+    def slave_step():
+        i = clock["slave"]
+        b.set_real(ag_vr, [float(values[i % 4000])])
+        b.do_step(0.01 * i, 0.01)
+        clock["slave"] += 1
+    for i in range(steps_done):                # the same history as the FMU's instance
+        b.set_real(ag_vr, [float(values[i % 4000])])
+        b.do_step(0.01 * i, 0.01)
+    rows = [("getReal of x[1]", best(lambda: fmu.getReal(x1)), best(lambda: b.get_real(x1))),
+            ("setReal of ag", best(lambda: fmu.setReal(ag_vr, [0.1])), best(lambda: b.set_real(ag_vr, [0.1]))),
+            ("setReal of ag + doStep (10 ms, linear)", best(fmu_step), best(slave_step))]
+    print("\n  the floor of one FMI call (wall us): through fmpy + pythonfmu, on the slave in-process, difference")
+    for label, through, inside in rows:
+        print(f"  {label:>40} {through:8.2f} {inside:8.2f} {through - inside:8.2f}")
 
 
 if __name__ == "__main__":
