@@ -28,6 +28,7 @@ not read them does not pay for them).
 """
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from pythonfmu.enums import Fmi2Status
@@ -107,6 +108,15 @@ class GroundMotion(Fmi2Slave):
             self._fill_knots()
             return getattr(self, attr)[idx]
         return get
+
+    def _array_reader(self, attr):
+        if attr not in self._KNOTS:
+            return functools.partial(getattr, self, attr)
+
+        def read():
+            self._fill_knots()
+            return getattr(self, attr)
+        return read
 
     def _fill_knots(self) -> None:
         if self._knot_step is None:
