@@ -163,9 +163,11 @@ class HostObserver:
         self.timing = 0.0           # N s, impulse delivered to the host minus received internally, this episode
         self.debt = 0.0             # J, energy the hand-over's timing gave the host this episode (_book_timing)
         self.repaid = 0.0           # J, of it taken back this episode by impulse withheld (ImpactResolver._withhold)
-        #: the host's side of this episode, step by step: (rate at the step start [m/s], at its end
-        #: [m/s], h [s], our forces that can reach the step [N], latest first) (absorbed_by_contact)
-        self.episode = ()
+        #: this episode's work on both sides (passivity): the resolver's own bodies', sum of impulse
+        #: times mean approach rate [J]; the host's, the same sum for our force of j steps before each
+        #: step, j = 0 .. _KERNEL_TAPS - 1 [J] (any kernel w delivers sum_j w_j of them)
+        self.own_work = 0.0
+        self.host_work = (0.0,) * _KERNEL_TAPS
         self.own = (0.0, 0.0, 0.0)  # (N s, m/s, m/s): the resolver's own impulse and rates, last step (record)
         #: standard kernels the current edge's rows do not exclude (all of them before any row)
         self.plausible = _STANDARD_KERNELS
@@ -196,15 +198,18 @@ class HostObserver:
             quiet = self.quiet_steps >= self.support
             hits = self.forces[:self.support]
             delivered = 0.0
-            if not quiet:
-                self.episode = self.episode + ((V, delta_dot, hp, self.forces, self.own),)
+            if not quiet and self.untimed:
+                I, u0, u1 = self.own
+                self.own_work += I * 0.5 * (u0 + u1)
+                mean = hp * 0.5 * (V + delta_dot)
+                self.host_work = tuple(W + mean * F for W, F in zip(self.host_work, _padded(self.forces)))
             if quiet:
                 clean = dV
                 self.rows, self.edge_given_up = (), False
                 if self.internal == 0.0:        # the episode is over
                     self.timing = self.debt = self.repaid = 0.0
                     self.untimed = self.kernel is None
-                    self.episode = ()
+                    self.own_work, self.host_work = 0.0, (0.0,) * _KERNEL_TAPS
             elif self.kernel is not None:
                 delivered = self._delivered(self.kernel, hits, hp)
                 clean = dV + delivered
@@ -284,7 +289,7 @@ class HostObserver:
         Both sides are summed alike, each step's impulse times the mean approach rate over the
         step (the host's work on the contact by the trapezoidal rule: exact for symplectic Euler
         and Newmark, third order for a zero-order hold).  Over the steps observed
-        (:attr:`episode`) the host's rates are measured: whatever moved its bodies is in them,
+        (:attr:`host_work`) the host's rates are measured: whatever moved its bodies is in them,
         the other contacts of a structure included, which ``int C A dt`` (:meth:`_book_timing`)
         misses (the shear buildings of the host matrix at 10 ms: 3 to 5 times what it books).
         Over this step and the coming ones (``own``: the resolver's own impulses [N s], the
@@ -295,10 +300,7 @@ class HostObserver:
         step in contact was noise that withheld from exact hosts).  Zero for a host that the
         resolver follows exactly."""
         m = self.m
-        created = 0.0
-        for V0, V1, hp, hits, (I, u0, u1) in self.episode:
-            F_host = sum(w * F for w, F in zip(kernel, hits))
-            created += I * 0.5 * (u0 + u1) - hp * F_host * 0.5 * (V0 + V1)
+        created = self.own_work - sum(w * W for w, W in zip(kernel, self.host_work))
         impulses, emitted, rates = own
         forces, V, rates_host = self.forces, self.last[1], []
         D = V - rates[0]                      # m/s, the host's rate minus the resolver's

@@ -119,7 +119,9 @@ class ImpactResolver:
        episode that began before the host's kernel was known (the first impact of a host that
        declared nothing) what the timing will still give the host after the last hand-over is
        projected and taken back by withholding impulse for good (:meth:`_withhold`): the host's
-       bodies separate a little slower; energy is taken rather than created.
+       bodies separate a little slower; energy is taken rather than created.  So is what the
+       host's own rates show created for every host timing not yet excluded
+       (:meth:`_passivity`): with several contacts on a structure ``int C A dt`` misses most of it.
 
     ``follow_host=False`` restores the free-mass model (``a_ext = 0``, no corrections).
     The instance holds only plain numbers, so ``copy.deepcopy`` saves its state.
@@ -306,7 +308,10 @@ class ImpactResolver:
         minus ``C / m``, weighted by the kernel).  A host the kernel times right gains
         nothing, and nothing is withheld; where the projection is off the host loses some
         contact energy instead (the criterion is one-sided: energy created is forbidden, a
-        contact energy error within 15 % is allowed).  The host's bodies receive ``dJ`` less relative impulse than the
+        contact energy error within 15 % is allowed).  Then, measured on the host's side
+        (:meth:`_passivity`), as much more as the smallest projection over the host timings the
+        rows do not exclude still shows created beyond ``_PASSIVITY_TOLERANCE``, found by
+        bisection on that projection, and only while the host's bodies separate.  The host's bodies receive ``dJ`` less relative impulse than the
         resolver's own: their total momentum is unchanged (the force pair is equal and
         opposite), and out of contact the host's state is the truth again (rule 2).
         """
@@ -351,7 +356,8 @@ class ImpactResolver:
         impulses, boundaries = [internal] + future, [self.rate0] + rates
 
         # the same, measured on the host's side (_passivity): what every plausible host timing
-        # shows created beyond the tolerance is withheld too, while the host separates
+        # shows created beyond the tolerance is withheld too, while the host separates (withheld
+        # from bodies that still approach, an impulse gives them energy)
         tolerance = _PASSIVITY_TOLERANCE * m * self.v_imp * self.v_imp
 
         def created(x):
@@ -360,9 +366,9 @@ class ImpactResolver:
         before, g_host = self._passivity([emitted - dJ] + emissions[1:], impulses, boundaries, h) \
             if obs.last is not None else (0.0, 0.0)
         if before > tolerance and g_host > 0.0 and created(emitted) < before:
-            lo, hi = dJ, emitted
+            lo, hi = dJ, emitted          # all of it when even that leaves more than the tolerance
             if created(hi) <= tolerance:
-                for _ in range(40):
+                for _ in range(40):           # the impulse to 1e-12 of this step's
                     mid = 0.5 * (lo + hi)
                     lo, hi = (mid, hi) if created(mid) > tolerance else (lo, mid)
             dJ = hi
