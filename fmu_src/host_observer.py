@@ -163,6 +163,14 @@ class HostObserver:
         self.timing = 0.0           # N s, impulse delivered to the host minus received internally, this episode
         self.debt = 0.0             # J, energy the hand-over's timing gave the host this episode (_book_timing)
         self.repaid = 0.0           # J, of it taken back this episode by impulse withheld (ImpactResolver._withhold)
+        #: this episode's work on both sides (passivity): the resolver's own bodies', sum of impulse
+        #: times mean approach rate [J]; the host's, the same sum for our force of j steps before each
+        #: step, j = 0 .. _KERNEL_TAPS - 1 [J] (any kernel w delivers sum_j w_j of them)
+        self.own_work = 0.0
+        self.host_work = (0.0,) * _KERNEL_TAPS
+        self.own = (0.0, 0.0, 0.0)  # (N s, m/s, m/s): the resolver's own impulse and rates, last step (record)
+        #: standard kernels the current edge's rows do not exclude (all of them before any row)
+        self.plausible = _STANDARD_KERNELS
         self.notices = []           # messages for the FMU log (drained by the adapter)
 
     def _set_kernel(self, kernel) -> None:
@@ -190,12 +198,18 @@ class HostObserver:
             quiet = self.quiet_steps >= self.support
             hits = self.forces[:self.support]
             delivered = 0.0
+            if not quiet and self.untimed:
+                I, u0, u1 = self.own
+                self.own_work += I * 0.5 * (u0 + u1)
+                mean = hp * 0.5 * (V + delta_dot)
+                self.host_work = tuple(W + mean * F for W, F in zip(self.host_work, _padded(self.forces)))
             if quiet:
                 clean = dV
                 self.rows, self.edge_given_up = (), False
                 if self.internal == 0.0:        # the episode is over
                     self.timing = self.debt = self.repaid = 0.0
                     self.untimed = self.kernel is None
+                    self.own_work, self.host_work = 0.0, (0.0,) * _KERNEL_TAPS
             elif self.kernel is not None:
                 delivered = self._delivered(self.kernel, hits, hp)
                 clean = dV + delivered
@@ -229,9 +243,12 @@ class HostObserver:
         self.last = (delta, delta_dot, h)
         return cx, cu
 
-    def record(self, F: float, h: float, internal: float) -> None:
+    def record(self, F: float, h: float, internal: float, own=(0.0, 0.0, 0.0)) -> None:
         """Book our mean force [N] of the step just taken, the impulse [N s] the resolver's own
-        bodies received in it, and what the structures were assumed to do."""
+        bodies received in it, what the structures were assumed to do, and ``own``: the impulse
+        [N s] the resolver's own bodies received whatever was withheld, their rate [m/s] at the
+        step start and at its end (:meth:`passivity`)."""
+        self.own = own
         self.forces = (F,) + self.forces[:_KERNEL_TAPS - 1]
         self.quiet_steps = self.quiet_steps + 1 if F == 0.0 else 0
         self.internal = internal
@@ -263,6 +280,46 @@ class HostObserver:
         """The host's kernel, or while it is unknown the latest standard one the edges do not
         exclude (``suspect``: the timing energy is booked for it)."""
         return _padded(self.kernel if self.kernel is not None else self.suspect)
+
+    def passivity(self, kernel, own, h: float) -> tuple[float, list[float]]:
+        """Energy [J] the host will have given the contact less than the resolver's own bodies
+        did, over this episode, if it delivers our impulses with ``kernel``; and the host's mean
+        rates [m/s] over this step and the coming ones.  Positive: energy created in the host.
+
+        Both sides are summed alike, each step's impulse times the mean approach rate over the
+        step (the host's work on the contact by the trapezoidal rule: exact for symplectic Euler
+        and Newmark, third order for a zero-order hold).  Over the steps observed
+        (:attr:`host_work`) the host's rates are measured: whatever moved its bodies is in them,
+        the other contacts of a structure included, which ``int C A dt`` (:meth:`_book_timing`)
+        misses (the shear buildings of the host matrix at 10 ms: 3 to 5 times what it books).
+        Over this step and the coming ones (``own``: the resolver's own impulses [N s], the
+        impulses handed over [N s], the resolver's own rates [m/s] at the steps' boundaries,
+        this step's start first) the host's rate is the resolver's plus the difference measured
+        at this step's start, changed by what the host receives more or less than the resolver's
+        bodies (the structural motion taken equal on both sides: a drift extrapolated from one
+        step in contact was noise that withheld from exact hosts).  Zero for a host that the
+        resolver follows exactly."""
+        m = self.m
+        created = self.own_work - sum(w * W for w, W in zip(kernel, self.host_work))
+        impulses, emitted, rates = own
+        forces, V, rates_host = self.forces, self.last[1], []
+        D = V - rates[0]                      # m/s, the host's rate minus the resolver's
+        for j in range(len(emitted) + len(kernel)):
+            I = impulses[j] if j < len(impulses) else 0.0
+            forces = ((emitted[j] / h if j < len(emitted) else 0.0),) + forces[:len(kernel) - 1]
+            delivered = h * sum(w * F for w, F in zip(kernel, forces))
+            u0 = rates[min(j, len(rates) - 1)]
+            u1 = rates[min(j + 1, len(rates) - 1)]
+            D1 = D - (delivered - I) / m
+            V0, V1 = u0 + D, u1 + D1
+            created += I * 0.5 * (u0 + u1) - delivered * 0.5 * (V0 + V1)
+            rates_host.append(0.5 * (V0 + V1))
+            D = D1
+        return created, rates_host
+
+    def plausible_kernels(self) -> tuple:
+        """The host's kernel when known, else the standard kernels the current edge does not exclude."""
+        return (_padded(self.kernel),) if self.kernel is not None else tuple(_padded(w) for w in self.plausible)
 
     def _book_timing(self, delivered: float, internal: float, clean: float) -> None:
         """Energy the hand-over's timing gave the host over one observed step (rule 7).
@@ -395,6 +452,9 @@ class HostObserver:
         # withheld from an exact Gauss-Seidel host at 20 ms enough to lose one of five impacts,
         # tests/test_resolver_attached.py)
         self.suspect = best if fits else _UNFIT_SUSPECT
+        # the hosts the rows do not exclude by 5 sigma (every standard one when none fits)
+        self.plausible = tuple(w for w in _STANDARD_KERNELS if chi2[w] - chi2[best] <= 25.0) if fits \
+            else _STANDARD_KERNELS
         if len(rows) >= _MAX_EDGE_ROWS or not any(F != 0.0 for F in self.forces[:_KERNEL_TAPS - 1]):
             self.edge_given_up = True
             self.rows = ()

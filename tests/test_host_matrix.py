@@ -1,6 +1,6 @@
 """pounding.fmu in hosts that are not this package's master (issue 13, point 3).
 
-Each host is a few lines over fmpy's ``FMU2Slave`` (cosim/hosts.py): integrators exact for a
+Each host is a few lines over fmpy's ``FMU2Slave`` (cosim/peers/hosts.py): integrators exact for a
 held force (zero-order hold), semi-implicit (symplectic) Euler, Newmark average acceleration
 and HHT-alpha, each in Gauss-Seidel and in Jacobi order, none declaring anything to the FMU
 (``host = "any"``).  Criteria (the issue's, cosim.peers.hosts.judge_*):
@@ -11,12 +11,15 @@ and HHT-alpha, each in Gauss-Seidel and in Jacobi order, none declaring anything
   impacts, peak force within 2 %, contact energy within 3 % of the monolithic reference
   (cosim.peers.reference, DOP853 at rtol 1e-10), and never more mechanical plus dissipated energy
   than was put in (1 % margin);
-* at 5 and 10 ms: within 10 % / 15 %.  A host that applies the force late gains energy at the
-  first impact (the FMU cannot know the host's timing before it has seen the host respond to a
-  force); the FMU takes it back by withholding impulse (ImpactResolver._withhold): less than the
-  1 % margin is created in every host at 5 ms and by the two oscillators at 10 ms.  The shear
-  buildings at 10 ms (three contacts, each seeing the others' late impulses in its structural
-  motion) still create more in two Jacobi hosts: every such run must have been warned about.
+* at 5 and 10 ms: within 10 % / 15 %; and at every step, in every host, never more than 1 %
+  energy created.  A host that applies the force late gains energy at the first impact (the FMU
+  cannot know the host's timing before it has seen the host respond to a force); the FMU takes
+  it back by withholding impulse (ImpactResolver._withhold): the energy the timing gave the host
+  (``int C A dt``) and, measured on the host's side, what every host timing the first rows do
+  not exclude shows created (HostObserver.passivity) -- with three contacts each moves the
+  others' bodies, which only the measurement sees.
+* the oracle: each host integrator's energy balance (its own discrete one) closes to round-off
+  under arbitrary held forces, so that "energy created" is the contacts', not a quadrature error.
 
 The whole matrix with its numbers: ``python benchmarks/host_matrix.py`` (docs/fmi_hosts.md).
 """
@@ -97,20 +100,52 @@ def test_every_model_converges_in_every_host(unzip_dir, model):
 
 
 @pytest.mark.parametrize("h", [5e-3, 1e-2])
-def test_coarse_steps_stay_within_bounds_and_never_create_energy_silently(unzip_dir, cases, h):
+def test_coarse_steps_stay_within_bounds_and_never_create_energy(unzip_dir, cases, h):
     verdicts = _structures(unzip_dir, cases, h)
-    for name, integrator, order, v in verdicts:
-        accuracy = [m for m in v.misses if not m.startswith("energy created")]
-        assert not accuracy, (name, integrator, order, v)
-        if v.created > hosts.ENERGY_MARGIN:
-            assert v.warned, (name, integrator, order, v)
-    # the Gauss-Seidel hosts exact for a held force create none at all (1 % margin)
-    assert all(v.created <= hosts.ENERGY_MARGIN for _, i, o, v in verdicts if (i, o) == ("zoh", "gauss-seidel"))
-    # the first impact's pay-back: within the margin in every host at 5 ms, and for the two
-    # oscillators at 10 ms too (before it: up to 1.1 % at 5 ms, 9.7 % at 10 ms)
-    created = [(name, i, o, v.created) for name, i, o, v in verdicts
-               if v.created > hosts.ENERGY_MARGIN and (h < 1e-2 or name.startswith("two oscillators"))]
-    assert not created, created
+    # every cell, every criterion: peak force, contact energy and no more than 1 % energy created
+    # (before the host-side measurement: 3.48 % and 1.91 % in two Jacobi cells of the shear
+    # buildings at 10 ms, 2.33 % and 1.27 % by the exact oracle below)
+    failing = [(name, integrator, order, v) for name, integrator, order, v in verdicts if v.misses]
+    assert not failing, failing
+    # and the withholding that takes it back loses no impact: the same counts as before it
+    # (docs/fmi_hosts.md; at these steps they are not a criterion, the cells' counts are)
+    counts = {5e-3: ([5, 6, 5, 5, 6, 5, 6, 5], [12, 12, 11, 11, 12, 11, 12, 11]),
+              1e-2: ([6, 5, 4, 5, 5, 5, 5, 5], [12, 11, 11, 11, 11, 13, 11, 12])}[h]
+    assert [v.impacts for name, _, _, v in verdicts if name.startswith("two oscillators")] == counts[0]
+    assert [v.impacts for name, _, _, v in verdicts if name.startswith("two shear")] == counts[1]
+
+
+@pytest.mark.parametrize("integrator", list(hosts.INTEGRATORS))
+def test_the_hosts_energy_balance_closes(integrator):
+    """The oracle of "energy created": each integrator's energy plus its damping work minus the
+    work of the applied forces, by its own discrete balance (hosts.Integrator), stays at the
+    initial energy under arbitrary held forces -- to round-off for the zero-order hold,
+    symplectic Euler and Newmark; within 1e-3 for HHT-alpha, whose load is weighted
+    ``(1 + alpha) p_(n+1) - alpha p_n`` and whose numerical damping takes energy.  The trapezoidal
+    rule of v' C v it replaces gave the shear buildings 0.57 % 'created' by symplectic Euler
+    before any contact (a negative control: it must not close)."""
+    import numpy as np
+
+    case = hosts.two_shear_buildings()
+    rng = np.random.default_rng(7)
+    body = hosts.INTEGRATORS[integrator](case.structure, case.x0, case.v0)
+    E0, C = body.energy(), case.structure.C
+    trapezoid, worst, most = 0.0, 0.0, -np.inf
+    for k in range(400):
+        f = rng.normal(0.0, 2e5, case.structure.masses.size) if k % 3 else np.zeros(case.structure.masses.size)
+        v0 = body.v.copy()
+        body.advance(0.01, f)
+        trapezoid += 0.005 * (v0 @ C @ v0 + body.v @ C @ body.v)
+        gap = (body.energy() + body.dissipated - body.work - E0) / E0
+        worst, most = max(worst, abs(gap)), max(most, gap)
+    assert body.dissipated > 0.5 * E0           # the forces and the damping did work
+    if integrator == "hht":
+        # measured 3.4e-4 under these random forces (2.2e-5 in free vibration)
+        assert most < 1e-3
+    else:
+        assert worst < 1e-12                     # round-off of 400 steps (measured <= 1.7e-15)
+    # negative control: the trapezoidal damping does not close (Newmark: h dv' C dv / 4 a step)
+    assert abs(body.energy() + trapezoid - body.work - E0) / E0 > 1e-4
 
 
 def test_the_issue_numbers_are_gone(unzip_dir, cases):
