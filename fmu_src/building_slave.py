@@ -60,7 +60,10 @@ _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 # doubles to every FMU; the margin only absorbs a host that rounds times differently).
 _KNOT_TIME_TOL = 1e-9
 # Outputs computed from the state when read (none of them is needed to advance the state).
-_DERIVED = ("V", "mu", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak")
+# drift_residual is published at every step instead: the master reads it at every step to prove
+# a gap open for a yielding building (cosim/master/gap_bound.py), and reading a derived output
+# runs the deferred in-step peak searches.
+_DERIVED = ("V", "mu", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak")
 
 
 class Building(Fmi2Slave):
@@ -174,7 +177,6 @@ class Building(Fmi2Slave):
             heights = self.storey_height[:self._n]
             cached = self._derived_cache = {
                 "V": integ.storey_shear(state),
-                "drift_residual": integ.residual_drift(state),
                 "x_peak": state.peak_x,
                 "drift_peak": state.peak_drift,
                 "a_peak": state.peak_accel,
@@ -225,7 +227,7 @@ class Building(Fmi2Slave):
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
         self._steps = {}
-        for out in (self.x, self.v, self.a, self.drift):
+        for out in (self.x, self.v, self.a, self.drift, self.drift_residual):
             out[:] = 0.0
         self._publish(self.F[:n])
 
@@ -236,6 +238,8 @@ class Building(Fmi2Slave):
         self.x[:n] = state.u
         self.v[:n] = state.v
         self.drift[:n] = drift
+        if not self._legacy:   # d - V / k (fmu_src/hysteresis.py); a linear storey's stays 0
+            self.drift_residual[:n] = drift - V / self._building.stiffnesses
         if self._legacy:   # as the linear model always computed it (bit for bit)
             self.a[:n] = self._R @ np.concatenate([state.u, state.v]) + force / self._building.masses
         else:

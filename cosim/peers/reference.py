@@ -93,10 +93,7 @@ from scipy.optimize import minimize_scalar
 from fmu_src.contact_laws import law_for
 from fmu_src.ground_records import load_record
 
-from fmu_src.hysteresis import StoreyHysteresis
-
-from ..master.models import initial_state, shear_building
-from ..master.names import element_name
+from ..master.models import initial_state, shear_building, storey_hysteresis
 from .storeys import EVENT_KINDS as STOREY_EVENTS, Storeys
 
 OPEN, APPROACH, RESTITUTION, STICK = "open", "approach", "restitution", "stick"
@@ -1010,11 +1007,7 @@ def scene_inputs(scene) -> dict:
     buildings, x0, v0, hystereses = [], [], [], []
     for spec in scene.buildings:
         buildings.append(shear_building(spec))
-        floors = range(1, int(spec.value("n_storeys")) + 1)
-        hystereses.append(StoreyHysteresis(
-            str(spec.value("hysteresis")), [float(spec.value(element_name("Fy", i))) for i in floors],
-            float(spec.value("alpha")), float(spec.value("bw_n")), float(spec.value("bw_beta")),
-            float(spec.value("bw_gamma"))))
+        hystereses.append(storey_hysteresis(spec))
         x, v = initial_state(spec)
         x0.append(np.array(x))
         v0.append(np.array(v))
