@@ -286,13 +286,13 @@ class OpenGaps:
                 return None
             n = bound.n
 
-            def where(name):
+            def floors(name):
                 return np.array([index[column(node.name, element_name(name, i))] for i in range(1, n + 1)])
-            buildings[node.name] = (bound, where("x"), where("v"))
+            buildings[node.name] = (bound, floors("x"), floors("v"))
             if not linear:
                 law = storey_hysteresis(node.spec)
                 elastic[node.name] = ElasticRange(law.alpha, law.yield_drift(building.stiffnesses),
-                                                  where("drift_residual"))
+                                                  floors("drift_residual"))
         where = {lv.instance: lv for lv in system.scene.levels}
         levels = []
         for lv in contact_levels:
