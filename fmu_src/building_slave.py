@@ -61,8 +61,10 @@ _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 _KNOT_TIME_TOL = 1e-9
 # Outputs computed from the state when read (none of them is needed to advance the state).
 # (rows of one block, N_MAX wide, filled at the first read after a step: x_peak, drift_peak and
-# a_peak are the state's running peaks in one copy)
-_DERIVED = ("V", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
+# a_peak are the state's running peaks in one copy).  drift_residual is published at every step
+# instead: the master reads it at every step to prove a gap open for a yielding building
+# (cosim/master/gap_bound.py), and reading a derived output runs the deferred peak searches.
+_DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
 
 
 class Building(Fmi2Slave):
@@ -187,11 +189,9 @@ class Building(Fmi2Slave):
             integ.resolve_peaks(state, self.cost)      # the in-step peak searches left to do
             block = self._derived_block
             block[0, :n] = integ.storey_shear(state)
-            if integ.hysteresis.inelastic:              # a linear storey has no residual drift: 0
-                block[1, :n] = integ.residual_drift(state)
-            block[2:5, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
-            np.divide(state.peak_drift, self.storey_height[:n], out=block[5, :n])
-            np.multiply(state.peak_drift, self._inv_yield_drift, out=block[6, :n])
+            block[1:4, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
+            np.divide(state.peak_drift, self.storey_height[:n], out=block[4, :n])
+            np.multiply(state.peak_drift, self._inv_yield_drift, out=block[5, :n])
             self._derived_cache = self._derived_rows
         return self._derived_cache
 
@@ -239,7 +239,7 @@ class Building(Fmi2Slave):
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
         self._steps = {}
-        for out in (self.x, self.v, self.a, self.drift):
+        for out in (self.x, self.v, self.a, self.drift, self.drift_residual):
             out[:] = 0.0
         self._publish(self.F[:n])
 
@@ -250,6 +250,8 @@ class Building(Fmi2Slave):
         self.x[:n] = state.u
         self.v[:n] = state.v
         self.drift[:n] = drift
+        if not self._legacy:   # d - V / k (fmu_src/hysteresis.py); a linear storey's stays 0
+            self.drift_residual[:n] = drift - V / self._building.stiffnesses
         if self._legacy:   # as the linear model always computed it (bit for bit)
             self.a[:n] = self._R @ np.concatenate([state.u, state.v]) + force / self._building.masses
         else:

@@ -10,6 +10,7 @@ import pytest
 from cosim.fmus import POUNDING, fmu_spec
 from cosim.master.dormancy import hermite
 from cosim.master.loader import bundled_scenes, load_scene
+from cosim.master.models import storeys_are_linear
 from cosim.master.results import summarize
 from cosim.master.simulate import simulate
 from cosim.master.system import System
@@ -40,7 +41,8 @@ def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
         assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-3)
         assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-3)
     if asleep.scene.contacts and asleep.stats["proofs"] == 0:
-        # yielding storeys: no proof that a gap stays open (cosim/master/gap_bound.py), nothing sleeps
+        # Bouc-Wen storeys (none bundled): no proof that a gap stays open (cosim/master/gap_bound.py),
+        # nothing sleeps
         assert asleep.stats.get("dormant_steps", 0) == 0
         assert asleep.cost.communication_steps == awake.cost.communication_steps
         return
@@ -65,20 +67,30 @@ def test_long_steps_keep_the_impacts(catalog, name):
     if scene.coupling != "adaptive" or not scene.contacts:
         return      # a fixed step; no contact (one_building: tests/test_scenario_one_building.py)
     long = simulate_scene(catalog, name, record="summary", output_interval=None)
-    if long.stats["proofs"] == 0:
-        # yielding storeys: no proof that a gap stays open (cosim/master/gap_bound.py), no long step
-        assert long.stats["long_steps"] == 0
-        return
     base = simulate_scene(catalog, name, record="summary", output_interval=None, long_steps=False)
     a, b = summarize(base), summarize(long)
-    assert long.stats["long_steps"] > 0.3 * long.cost.communication_steps
-    assert long.cost.communication_steps < 0.25 * base.cost.communication_steps
+    # peak force / energy: 0.1 % / 0.3 %, above the measured 0.11 % / 0.22 % of the linear scenes
+    # (the base steps' own error)
+    if any(not storeys_are_linear(spec) for spec in scene.buildings):
+        # yielding storeys: long steps only where the proof also keeps every storey elastic
+        # (cosim/master/gap_bound.py), base steps through the strong shaking.  Measured: long
+        # steps 486 of 936 steps against 4000 base steps (default_inelastic), 519 of 1439 against
+        # 4000 (kasai_maison_inelastic)
+        assert long.stats["long_steps"] > 0.2 * long.cost.communication_steps
+        assert long.cost.communication_steps < 0.6 * base.cost.communication_steps
+        # a yielding building gets the record's knots over every step, long or not (system.py,
+        # Node.pull_with_knots): both runs integrate the same motion exactly, so the contacts see
+        # the same floors and the results agree to round-off (measured 4e-13)
+        rel_force = rel_energy = 1e-9
+    else:
+        assert long.stats["long_steps"] > 0.3 * long.cost.communication_steps
+        assert long.cost.communication_steps < 0.25 * base.cost.communication_steps
+        rel_force, rel_energy = 2e-3, 3e-3
     assert b.impacts == a.impacts
     for c in a.contacts:
         assert b.contacts[c].impacts == a.contacts[c].impacts
-        # 0.1 % / 0.3 %: above the measured 0.11 % / 0.22 %, the base steps' own error
-        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=2e-3)
-        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=3e-3)
+        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=rel_force)
+        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=rel_energy)
 
 
 def test_hermite_states_inside_a_long_skipped_step():

@@ -68,18 +68,19 @@ def test_at_default_settings_it_matches_the_reference(inelastic):
     s = result.summary
     assert (result.scene.coupling, result.scene.step) == ("adaptive", 0.01)
     assert s.impacts == ref.impacts >= 2
-    assert s.peak_force_N == pytest.approx(ref.peak_force_N, rel=0.01)                 # measured 0.24 %
-    assert s.dissipated_energy_J == pytest.approx(ref.energies.contact_dissipated[-1], rel=0.02)   # 0.03 %
+    assert s.peak_force_N == pytest.approx(ref.peak_force_N, rel=0.01)                 # measured 0.38 %
+    assert s.dissipated_energy_J == pytest.approx(ref.energies.contact_dissipated[-1], rel=0.02)   # 0.11 %
     for b, spec in enumerate(result.scene.buildings):
         n = result.scene.n_storeys(spec.name)
         summary = s.buildings[spec.name]
-        # in-step peaks of every storey (measured within 0.5 %: the 10 ms hold of the ground
-        # acceleration's step mean, which knots remove, see docs/inelastic.md)
+        # in-step peaks of every storey (measured within 0.18 %; 0.5 % while a step inside one
+        # record interval held the ground acceleration's mean, before yielding buildings got the
+        # record's knots over every step)
         np.testing.assert_allclose(final(result, spec.name, "drift_peak", n), ref.peak_drifts[b], rtol=0.01)
         np.testing.assert_allclose(final(result, spec.name, "mu", n), ref.ductility[b], rtol=0.01)
         assert summary.peak_ductility == pytest.approx(ref.ductility[b].max(), rel=0.01)
-        # the residual drift the summary reports (the storey of largest magnitude): measured
-        # 0.24 % and 0.03 %; every storey within 1 % of that building's largest (0.74 %)
+        # the residual drift the summary reports (the storey of largest magnitude); every storey
+        # within 1 % of that building's largest (measured 0.11 %; 0.74 % with the held mean)
         k = int(np.argmax(np.abs(ref.residual_drifts[b])))
         assert summary.residual_drift_storey == k + 1
         assert summary.residual_drift_m == pytest.approx(ref.residual_drifts[b][k], rel=0.01)
@@ -88,6 +89,10 @@ def test_at_default_settings_it_matches_the_reference(inelastic):
         assert summary.hysteretic_energy_J == pytest.approx(ref.hysteretic_energy_J[b], rel=0.01)
         # what the scene was designed for: peak ductility 2 to 4 in each building
         assert 2.0 <= summary.peak_ductility <= 4.0
+    # long steps where the proof keeps every gap open and every storey elastic
+    # (cosim/master/gap_bound.py): measured 936 steps (4000 base steps without that proof)
+    assert result.result.cost.communication_steps < 1200
+    assert result.result.stats["long_steps"] > 0
 
 
 def test_energy_balance_closes_with_the_hysteretic_energy(inelastic):

@@ -25,8 +25,21 @@ points it cannot exceed the mean of its end values by more than ``L dS / 2``, ``
 its rate (the free modal energy never grows: ``|q_j_free'| <= sqrt(w_j^2 q_j^2 + q_j'^2)``).
 The ground acceleration's bound is the largest ``|ag|`` of the record's polyline up to each
 grid point (the ground FMU's knots, :mod:`cosim.master.knots`); a contact force held over the
-step enters as ``|phi_j' F|``.  Nonlinear (yielding) storeys have no such bound: the master
-then takes no long step and leaves no contact dormant.
+step enters as ``|phi_j' F|``.
+
+Yielding storeys (bilinear, kinematic hardening: :mod:`fmu_src.hysteresis`).  A storey whose
+elastic element does not yield, ``|d - s| < dy`` with its slip ``s`` fixed, has the shear
+``V = k d - (1 - alpha) k s``: the building is the linear one (initial stiffness ``K``, the
+same classical damping) loaded by the constant floor forces ``D' (1 - alpha) k s``.  Their
+static response ``u_s`` has the storey drifts ``D u_s = (1 - alpha) s``, the residual drifts
+``r`` the building FMU publishes (``drift_residual``), so ``u_s = cumsum(r)`` and ``w = u - u_s``
+moves as the linear building does.  The proof bounds ``w`` as above and, with the same modal
+bound on the drifts ``D w = D Phi q``, proves that every storey stays elastic over the horizon:
+``|w_i - alpha s_i| < dy_i`` (since ``d - s = w - alpha s``), with a margin (:data:`ELASTIC_MARGIN`)
+that excludes a storey yielding now (``|d - s| = dy``).  A horizon is then the shorter of the
+gaps' and the storeys': over it the building *is* linear and its floors' bound holds; beyond
+it the master takes base steps.  Bouc-Wen storeys have no elastic range (``z`` changes
+whenever the drift does): no proof, base steps.
 """
 from __future__ import annotations
 
@@ -40,6 +53,10 @@ from fmu_src.shear_building import ShearBuilding
 #: grid intervals over a horizon: with relative speeds of ~0.5 m/s and a 0.32 s horizon the
 #: free motion's slack between grid points is ~1 mm, a few % of a building gap
 GRID = 64
+#: a storey is proven elastic while ``|d - s| <= (1 - ELASTIC_MARGIN) dy``: a yielding storey sits
+#: at ``|d - s| = dy`` to round-off (~1e-16 dy: the master reads ``s`` through ``drift_residual``),
+#: which this margin refuses; it costs 1e-6 of the elastic range
+ELASTIC_MARGIN = 1e-6
 
 
 class ModalBound:
@@ -61,6 +78,8 @@ class ModalBound:
         c = np.diag(modal_c)
         with np.errstate(divide="ignore", invalid="ignore"):
             self.zeta = np.where(w > 0.0, c / (2.0 * np.where(w > 0.0, w, 1.0)), 0.0)
+        self.drift_phi = phi.copy()                # storey drifts d = D u: D Phi
+        self.drift_phi[1:] -= phi[:-1]
         self._tables: dict[float, tuple[np.ndarray, ...]] = {}
 
     # -- the free motion and the forced bound on a grid of s = H k / GRID ------------------------------
@@ -114,11 +133,13 @@ class FloorMotion:
     """One building's motion over a horizon ``H``, as the contact levels ask for it."""
 
     def __init__(self, bound: ModalBound, u: np.ndarray, v: np.ndarray, H: float,
-                 ground_bound: np.ndarray, force: np.ndarray | None):
+                 ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None):
         """``ground_bound[k]`` (m/s^2) bounds ``|ag|`` over ``[0, s_k]``; ``force`` (N, per floor)
-        is held over the horizon (None: no force)."""
+        is held over the horizon (None: no force); ``shift`` (m, per floor) the static
+        displacement the modes move about (yielding storeys' slips, module docstring; None: 0)."""
         self.bound = bound
-        self.Q, self.speed = bound.free_motion(u, v, H)
+        self.shift = shift
+        self.Q, self.speed = bound.free_motion(u if shift is None else u - shift, v, H)
         _, _, _, G = bound.tables(H)
         self.G = G
         self.ground = ground_bound
@@ -132,7 +153,19 @@ class FloorMotion:
         forced = (a * np.abs(self.bound.gamma)) @ self.G * self.ground
         if self.modal_force is not None:
             forced = forced + (a * self.modal_force) @ self.G
-        return row @ self.Q, forced, float(a @ self.speed)
+        free = row @ self.Q
+        return (free if self.shift is None else free + self.shift[f]), forced, float(a @ self.speed)
+
+    def drifts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every storey's drift about the static shift, ``D w`` (module docstring): free part on the
+        grid (m, storeys x points), forced bound on the grid (m, increasing) and the bound on the
+        free rate (m/s, per storey)."""
+        rows = self.bound.drift_phi
+        a = np.abs(rows)
+        forced = (a * np.abs(self.bound.gamma)) @ self.G * self.ground
+        if self.modal_force is not None:
+            forced = forced + (a * self.modal_force) @ self.G
+        return rows @ self.Q, forced, a @ self.speed
 
 
 def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
@@ -149,6 +182,43 @@ def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.nda
     upper = 0.5 * (delta[:-1] + delta[1:]) + 0.5 * (ll + lr) * dS + bl[1:] + br[1:]
     bad = np.flatnonzero(upper >= 0.0)
     return H if bad.size == 0 else float(bad[0]) * dS
+
+
+def band_horizon(free: np.ndarray, forced: np.ndarray, rate: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                 H: float) -> float:
+    """Longest ``s <= H`` (s) over which every row's ``x = free + forced part`` provably stays
+    inside ``(lo, hi)``, from :meth:`FloorMotion.drifts` (rows x points, per row) and the
+    bounds ``lo``, ``hi`` per row (0 if a row is not inside now)."""
+    x0 = free[:, 0]
+    if not (np.all(x0 > lo) and np.all(x0 < hi)):
+        return 0.0
+    dS = H / GRID
+    # interval k: the free part within its rate bound of the chord's mean, the forced at its end
+    mid = 0.5 * (free[:, :-1] + free[:, 1:])
+    slack = 0.5 * dS * rate[:, None] + forced[:, 1:]
+    bad = np.flatnonzero(((mid + slack >= hi[:, None]) | (mid - slack <= lo[:, None])).any(axis=0))
+    return H if bad.size == 0 else float(bad[0]) * dS
+
+
+class ElasticRange:
+    """What proves a bilinear building's storeys elastic (module docstring): ``alpha``, the
+    yield drifts ``dy`` (m) and where the residual drifts ``r`` live in ``System.y``."""
+
+    def __init__(self, alpha: float, yield_drift: np.ndarray, residual: np.ndarray):
+        self.alpha = float(alpha)
+        self.half_width = (1.0 - ELASTIC_MARGIN) * np.asarray(yield_drift, dtype=float)
+        self.residual = residual
+
+    def shift(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(u_s, alpha s)``: the floors' static displacement about which the storeys are
+        linear (m) and the centre of each storey's elastic range in ``D w`` (m)."""
+        r = y[self.residual]
+        return np.cumsum(r), self.alpha / (1.0 - self.alpha) * r
+
+    def horizon(self, motion: FloorMotion, centre: np.ndarray, H: float) -> float:
+        """Longest ``s <= H`` (s) over which every storey provably stays elastic."""
+        free, forced, rate = motion.drifts()
+        return band_horizon(free, forced, rate, centre - self.half_width, centre + self.half_width, H)
 
 
 def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
@@ -188,41 +258,53 @@ class OpenGaps:
     """Every contact level of a system with what proves its gap open (module docstring):
     each building's :class:`ModalBound` and where its floors' states live in ``System.y``.
 
-    :meth:`build` returns None when a building has no such bound (yielding storeys,
+    :meth:`build` returns None when a building has no such bound (Bouc-Wen storeys,
     non-classical damping): the master then neither takes long steps nor lets contacts sleep.
+    A bilinear building's proof holds while its storeys are proven elastic (:class:`ElasticRange`).
     """
 
-    def __init__(self, buildings: dict, levels: list):
+    def __init__(self, buildings: dict, levels: list, elastic: dict | None = None):
         self.buildings = buildings          # name -> (ModalBound, x index array, v index array)
         self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
+        self.elastic = elastic or {}        # name -> ElasticRange, for the bilinear buildings
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
-        from .models import shear_building, storeys_are_linear
+        from .models import shear_building, storey_hysteresis, storeys_are_linear
         from .names import column, element_name
 
         index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
-        buildings = {}
+        buildings, elastic = {}, {}
         for node in system.buildings:
-            if not storeys_are_linear(node.spec):
-                return None
+            linear = storeys_are_linear(node.spec)
+            if not linear and storey_hysteresis(node.spec).model != "bilinear":
+                return None                 # Bouc-Wen: no elastic range (module docstring)
             try:
-                bound = ModalBound(shear_building(node.spec))
+                building = shear_building(node.spec)
+                bound = ModalBound(building)
             except ValueError:
                 return None
             n = bound.n
-            buildings[node.name] = (bound, np.array([index[column(node.name, element_name("x", i))] for i in range(1, n + 1)]),
-                                    np.array([index[column(node.name, element_name("v", i))] for i in range(1, n + 1)]))
+
+            def floors(name):
+                return np.array([index[column(node.name, element_name(name, i))] for i in range(1, n + 1)])
+            buildings[node.name] = (bound, floors("x"), floors("v"))
+            if not linear:
+                law = storey_hysteresis(node.spec)
+                elastic[node.name] = ElasticRange(law.alpha, law.yield_drift(building.stiffnesses),
+                                                  floors("drift_residual"))
         where = {lv.instance: lv for lv in system.scene.levels}
         levels = []
         for lv in contact_levels:
             level = where[lv.name]
             levels.append((level.left, level.floor_left - 1, level.right, level.floor_right - 1, lv.gap))
-        return cls(buildings, levels)
+        return cls(buildings, levels, elastic)
 
     def columns(self, system) -> list[str]:
-        """The Real outputs the proof reads: every floor's displacement and velocity."""
-        return [system.columns[i] for _, x, v in self.buildings.values() for i in np.concatenate((x, v))]
+        """The Real outputs the proof reads: every floor's displacement and velocity, and the
+        residual drifts of yielding buildings."""
+        out = [system.columns[i] for _, x, v in self.buildings.values() for i in np.concatenate((x, v))]
+        return out + [system.columns[i] for e in self.elastic.values() for i in e.residual]
 
     def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
                  which: Sequence[int] | None = None) -> list[float]:
@@ -230,12 +312,21 @@ class OpenGaps:
         stays open from now, with ``ground[k]`` bounding ``|ag|`` up to grid point ``k`` and
         ``forces`` (building -> force per floor, N) held over the horizon."""
         motions = {}
+        linear = {}                         # building -> how long it provably stays linear (s)
         out = []
         for k in (range(len(self.levels)) if which is None else which):
             left, fl, right, fr, gap = self.levels[k]
             for b in (left, right):
                 if b not in motions:
                     bound, ix, iv = self.buildings[b]
-                    motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, (forces or {}).get(b))
-            out.append(open_horizon(motions[left].floor(fl), motions[right].floor(fr), gap, H))
+                    elastic = self.elastic.get(b)
+                    if elastic is None:
+                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, (forces or {}).get(b))
+                        linear[b] = H
+                    else:
+                        shift, centre = elastic.shift(y)
+                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, (forces or {}).get(b), shift)
+                        linear[b] = elastic.horizon(motions[b], centre, H)
+            s = min(linear[left], linear[right])
+            out.append(0.0 if s == 0.0 else min(s, open_horizon(motions[left].floor(fl), motions[right].floor(fr), gap, H)))
         return out

@@ -14,6 +14,7 @@ import numpy as np
 
 from fmu_src.contact_laws import ContactLaw, law_for
 from fmu_src.ground_records import Record, record_from_parameters
+from fmu_src.hysteresis import StoreyHysteresis
 from fmu_src.shear_building import ShearBuilding
 
 from .interface import parameter_defaults
@@ -34,6 +35,16 @@ def shear_building(spec: "InstanceSpec") -> ShearBuilding:
     if T1 > 0.0:
         return ShearBuilding.from_period(T1, masses, stiffnesses, zeta, damping)
     return ShearBuilding(masses, stiffnesses, zeta, damping)
+
+
+def storey_hysteresis(spec: "InstanceSpec") -> StoreyHysteresis:
+    """The storey law of a ``building.fmu`` instance (:class:`fmu_src.hysteresis.StoreyHysteresis`),
+    from the parameters the slave's ``initialize()`` reads."""
+    floors = range(1, int(spec.value("n_storeys")) + 1)
+    return StoreyHysteresis(
+        str(spec.value("hysteresis")), [float(spec.value(element_name("Fy", i))) for i in floors],
+        float(spec.value("alpha")), float(spec.value("bw_n")), float(spec.value("bw_beta")),
+        float(spec.value("bw_gamma")))
 
 
 def storeys_are_linear(spec: "InstanceSpec") -> bool:

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..fmus import BUILDING, FMU_NAMES, fmu_spec
 from .fmi import FMU, InstanceProtocol, PortProtocol
+from .models import storeys_are_linear
 from .names import column
 from .steplog import LoggedContact
 
@@ -122,6 +123,7 @@ class Node:
     knot_count: PortProtocol | None = None
     knots_set: int = -1         # n_knots the instance has now (set only when it changes)
     knot_ag: int = -1           # where the held ``ag`` input sits in the input port (-1: none)
+    hold_mean: bool = False     # a step inside one record interval holds its mean (linear storeys)
 
     @property
     def name(self) -> str:
@@ -155,15 +157,19 @@ class Node:
 
         A step inside one record interval (two knots: the record is linear over it) gets the
         ground acceleration held at its exact mean, ``ag = (a0 + a1) / 2`` with ``n_knots = 0``:
-        the zero-order-hold step of earlier versions (exact velocity increments), which the
-        building takes with one cached matrix product; a step over several intervals gets the
-        knots (first-order hold, exact for the record)."""
+        the zero-order-hold step of earlier versions (exact velocity increments), which a linear
+        building takes with one cached matrix product; a step over several intervals, and every
+        step of a yielding building, gets the knots (first-order hold, exact for the record).
+        A yielding building's step costs the same either way, and the mean's error in the
+        response (second order in the step) is what kept ``kasai_maison_inelastic`` off the
+        criteria at 10 ms: its relative floor velocity before the first impact was 0.22 % off
+        the reference's at 10 ms, 0.05 % at 5 ms."""
         n_in = self.A.shape[0]
         buf = self.inputs.values
         if n_in:
             self._inputs(y, buf[:n_in])
         count = times.size
-        if count == 2 and self.knot_ag >= 0:
+        if count == 2 and self.hold_mean:
             buf[self.knot_ag] = 0.5 * (values[0] + values[1])
             self.inputs.set_first(n_in)
             count = 0
@@ -361,6 +367,7 @@ class System:
             n.inputs = n.instance.real_port(names)
             n.knot_offset = len(self._in_names[n.name])
             n.knot_ag = self._in_names[n.name].index("ag") if "ag" in self._in_names[n.name] else -1
+            n.hold_mean = n.knot_ag >= 0 and storeys_are_linear(n.spec)
             if capacity:
                 n.knot_count = n.instance.integer_port(["n_knots"])
                 n.knots_set = -1

@@ -91,10 +91,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
-from fmu_src.hysteresis import StoreyHysteresis
-
-from ..master.models import contact_law, ground_record, initial_state, shear_building
-from ..master.names import element_name
+from ..master.models import contact_law, ground_record, initial_state, shear_building, storey_hysteresis
 from .storeys import EVENT_KINDS as STOREY_EVENTS, Storeys
 
 OPEN, APPROACH, RESTITUTION, STICK = "open", "approach", "restitution", "stick"
@@ -1090,11 +1087,7 @@ def scene_inputs(scene) -> dict:
     buildings, x0, v0, hystereses = [], [], [], []
     for spec in scene.buildings:
         buildings.append(shear_building(spec))
-        floors = range(1, int(spec.value("n_storeys")) + 1)
-        hystereses.append(StoreyHysteresis(
-            str(spec.value("hysteresis")), [float(spec.value(element_name("Fy", i))) for i in floors],
-            float(spec.value("alpha")), float(spec.value("bw_n")), float(spec.value("bw_beta")),
-            float(spec.value("bw_gamma"))))
+        hystereses.append(storey_hysteresis(spec))
         x, v = initial_state(spec)
         x0.append(x)
         v0.append(v)
