@@ -110,8 +110,8 @@ QUIET_HORIZON = 8
 #: accepts a step no longer than the closing step at the speed found): states are saved only for
 #: steps that could be rejected.  The bound already doubles the relative acceleration and adds the
 #: record's peak; 1.5 more covers an approach speed half as fast again as that (the closing step
-#: scales as ``v^(2/(n+1) - 1)``: 8 % shorter for Hertz's n = 3/2).  Default scene: 15 saves -> 0,
-#: no rollback and no missed event either way.
+#: scales as ``v^(2/(n+1) - 1)``: 8 % shorter for Hertz's n = 3/2).  Saves on the default scene
+#: 15 -> 3, kasai_maison 103 -> 0; no rollback and no missed event either way.
 SAVE_SPEED_MARGIN = 1.5
 #: contact step / impact time scale, by contact mode (chosen from docs/accuracy.md)
 CONTACT_FRACTION_RESOLVED = 1.0 / 2.0
