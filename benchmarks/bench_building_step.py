@@ -8,13 +8,23 @@ El Centro at 0.3 g and prints the CPU time per communication step and per record
 than wall time, but a loaded machine still inflates it: compare figures of one run), with the
 work counters of the exact integrator (share of segments cleared by the cheap bound, peak
 searches deferred / run (nothing reads the peaks here, so the deferred ones stay pending),
-root searches, events).  ``--fmpy`` also times set + doStep + getReal of every output through
-fmpy for the linear and the bilinear building (what a master pays per step).
+root searches, events).
 
 Cases: the linear building with the ground acceleration held over 10 ms steps (the model of
 earlier versions, bit for bit); the same with the record's knots (first-order hold) over 10 ms
-and over 0.3 s steps (30 record intervals per step: the long steps of issue 17); bilinear and
-Bouc-Wen storeys yielding to a ductility of about 3.
+steps (one record interval) and over 0.16 s steps (16 record intervals per step: the long
+steps of issue 17); bilinear and Bouc-Wen storeys yielding to a ductility of about 3.
+
+Then what a master pays around the steps, per call on the slave class (CPU, best of
+``--repeat``): fmi2GetReal of the 14 outputs issue 17's master reads and of every output of the
+used storeys, fmi2SetReal of ``ag``, a force and 33 interleaved knot pairs, each through the
+slave base's access plans and through pythonfmu's own per-variable path (the same values), and
+fmi2GetFMUstate / fmi2SetFMUstate with deferred peak searches pending.
+
+``--fmpy`` also times the same calls through fmpy and the FMU's C layer (wall time): set +
+doStep + getReal of every output for the linear and the bilinear building, and the floor of
+pythonfmu itself: a getReal of one output, a setReal of one input, and a doStep whose Python
+side is known (the difference is what pythonfmu and fmpy add per call).
 """
 from __future__ import annotations
 
@@ -83,8 +93,8 @@ def main(argv=None) -> int:
     rec = load_record("elcentro1940")
     rec = rec.scaled(0.3 * G / rec.pga)
     cases = [(n, "linear", 0.01, False) for n in BUILDINGS] + \
-            [(n, "linear", 0.01, True) for n in (3, 5)] + [(n, "linear", 0.3, True) for n in (3, 5)] + \
-            [(n, "bilinear", 0.01, False) for n in (3, 5)] + [(3, "bilinear", 0.3, True)] + \
+            [(n, "linear", 0.01, True) for n in (3, 5)] + [(n, "linear", 0.16, True) for n in (3, 5, 15)] + \
+            [(n, "bilinear", 0.01, False) for n in (3, 5)] + [(3, "bilinear", 0.16, True)] + \
             [(3, "bouc_wen", 0.01, False)]
     print(f"{'storeys':>7} {'law':>9} {'hold':>6} {'h (s)':>6} {'us/step':>9} {'us/interval':>12} "
           f"{'cleared':>8} {'peaks d/s':>10} {'roots':>6} {'events':>7} {'max mu':>7}")
@@ -103,9 +113,61 @@ def main(argv=None) -> int:
         print(f"{n:>7} {model:>9} {'knots' if knots else 'ag':>6} {h:>6g} {1e6 * best / steps:>9.1f} "
               f"{1e6 * best / (STOP / rec.dt):>12.2f} {cleared:>8} {f'{c.peaks_deferred}/{c.peak_searches}':>10} {c.root_searches:>6} "
               f"{c.events:>7} {mu:>7.2f}")
+    access_costs(rec, args.repeat)
     if args.fmpy:
         fmpy_costs()
     return 0
+
+
+def access_costs(rec, repeat: int) -> None:
+    """get_real / set_real / FMU state on the slave class: the access plans against pythonfmu's path."""
+    import timeit
+
+    from pythonfmu import Fmi2Slave
+
+    n = 5
+    b = make(n)
+    t = 0.0
+    for _ in range(25):                         # 4 s of long steps: deferred peak searches pending
+        kt, ka = step_knots(rec, t, t + 0.16)
+        b.n_knots = len(kt)
+        b.t_knot[:len(kt)] = kt
+        b.ag_knot[:len(kt)] = ka
+        b.do_step(t, 0.16)
+        t += 0.16
+    ref = {var.name: vr for vr, var in b.vars.items()}
+    read14 = [ref[f"{a}[{i}]"] for a in ("x", "v") for i in range(1, n + 1)][:6] + \
+        [ref[name] for name in ("a[3]", "base_shear", "E_kinetic", "E_strain", "E_damping", "E_hysteretic",
+                                "E_input", "E_external")]
+    read_all = [vr for vr, var in b.vars.items() if var.causality.name == "output" and type(var).__name__ == "Real"
+                and ("[" not in var.name or int(var.name.split("[")[1][:-1]) <= n)]
+    write = [ref["ag"], ref["F[3]"]] + [ref[f"{a}[{k}]"] for k in range(1, 34) for a in ("t_knot", "ag_knot")]
+    values = [0.0] * len(write)
+
+    def cpu(f):
+        timer = timeit.Timer(f, timer=time.process_time)
+        return 1e6 * min(timer.repeat(repeat=max(repeat, 3), number=2000)) / 2000
+
+    print(f"\nFMI access on the slave class (n = {n}, {len(b._state.pending)} peak searches pending), CPU us per call:")
+    print(f"{'call':>44} {'plan':>8} {'pythonfmu':>10}")
+    for label, vrs in ((f"get_real, {len(read14)} outputs (issue 17 master)", read14),
+                       (f"get_real, every output of {n} storeys ({len(read_all)})", read_all)):
+        def fresh_plan():
+            b._derived_cache = None
+            return b.get_real(vrs)
+
+        def fresh_base():
+            b._derived_cache = None
+            return Fmi2Slave.get_real(b, vrs)
+        print(f"{label:>44} {cpu(fresh_plan):>8.2f} {cpu(fresh_base):>10.2f}")
+    label = f"set_real, ag, F and 33 knot pairs ({len(write)})"
+    print(f"{label:>44} {cpu(lambda: b.set_real(write, values)):>8.2f} "
+          f"{cpu(lambda: Fmi2Slave.set_real(b, write, values)):>10.2f}")
+    print(f"{'fmi2GetFMUstate':>44} {cpu(b._get_fmu_state):>8.2f}")
+    state = b._get_fmu_state()
+    # the restore itself (the host-mistake checks of _checked_set_state count references, which
+    # a benchmark's own references would confuse)
+    print(f"{'fmi2SetFMUstate':>44} {cpu(lambda: Building._set_fmu_state(b, state)):>8.2f}")
 
 
 def fmpy_costs() -> None:
@@ -153,9 +215,46 @@ def fmpy_costs() -> None:
             state["i"] += 1
         best = min(timeit.repeat(one_step, number=2000, repeat=5)) / 2000
         print(f"  {model:9s} {len(outputs)} outputs: {1e6 * best:.1f} us per step (wall, best of 5)")
+        if model == "linear":
+            floor(fmu, variables, values, state["i"])
         fmu.terminate()
         fmu.freeInstance()
     exit_process(0)
+
+
+def floor(fmu, variables, values, steps_done: int) -> None:
+    """What pythonfmu (and fmpy's ctypes call) add per FMI call: the same call through the FMU and
+    on an in-process slave of the same parameters and inputs (wall, best of 5)."""
+    import timeit
+
+    b = make(5)
+    x1 = [variables["x[1]"].valueReference]
+    ag_vr = [variables["ag"].valueReference]
+    clock = {"fmu": steps_done, "slave": steps_done}
+
+    def best(f):
+        return 1e6 * min(timeit.repeat(f, number=2000, repeat=5)) / 2000
+
+    def fmu_step():
+        i = clock["fmu"]
+        fmu.setReal(ag_vr, [float(values[i % 4000])])
+        fmu.doStep(0.01 * i, 0.01)
+        clock["fmu"] += 1
+
+    def slave_step():
+        i = clock["slave"]
+        b.set_real(ag_vr, [float(values[i % 4000])])
+        b.do_step(0.01 * i, 0.01)
+        clock["slave"] += 1
+    for i in range(steps_done):                # the same history as the FMU's instance
+        b.set_real(ag_vr, [float(values[i % 4000])])
+        b.do_step(0.01 * i, 0.01)
+    rows = [("getReal of x[1]", best(lambda: fmu.getReal(x1)), best(lambda: b.get_real(x1))),
+            ("setReal of ag", best(lambda: fmu.setReal(ag_vr, [0.1])), best(lambda: b.set_real(ag_vr, [0.1]))),
+            ("setReal of ag + doStep (10 ms, linear)", best(fmu_step), best(slave_step))]
+    print("\n  the floor of one FMI call (wall us): through fmpy + pythonfmu, on the slave in-process, difference")
+    for label, through, inside in rows:
+        print(f"  {label:>40} {through:8.2f} {inside:8.2f} {through - inside:8.2f}")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,8 @@
     pounding-cosim calibrate --model crvk --m1 200 --m2 200 --k 1.8974e11 --v 10 --cr 0.4
     pounding-cosim report --out docs/reproduction [--quick]
     pounding-cosim accuracy SCENE [--out DIR]
+    pounding-cosim spectrum RECORD [RECORD ...] [--damping 0.05] [--periods 0.02:10:100] [--out DIR]
+    pounding-cosim separation SCENE [--records R ...] [--pga G] [--no-check] [--out DIR]
     pounding-cosim build-fmus [--out DIR] [--force] [NAME ...]
     pounding-cosim export-ssp SCENE FILE.ssp;  pounding-cosim cr-table;  pounding-cosim fmu-docs;  pounding-cosim opensees SCENE
     pounding-cosim --version
@@ -75,7 +77,7 @@ def exit_code(exc: BaseException) -> int:
     cluster_lost = _loaded("cosim.apps.study.cluster", "ClusterLost")
     if cluster_lost is not None and isinstance(exc, cluster_lost):
         return EXIT_FAILED   # a study's scheduler (or every able worker) went away: rows kept
-    if isinstance(exc, (BadInput, SceneError, FileNotFoundError) + app_errors):
+    if isinstance(exc, (BadInput, SceneError, FileNotFoundError, FileExistsError) + app_errors):
         return EXIT_BAD_INPUT
     raise exc
 
@@ -109,7 +111,8 @@ def cmd_run(args) -> int:
     run = run_scene(args.scene, _overrides(args.overrides), out=args.out, overwrite=args.overwrite,
                     coupling=args.coupling, step=args.step, stop_time=args.stop_time, fmu_dir=args.fmu_dir,
                     plots=not args.no_plots, progress=False if args.no_progress else None,
-                    output_interval=args.output_interval, record=record, max_steps=args.max_steps)
+                    output_interval=args.output_interval, record=record, max_steps=args.max_steps,
+                    parquet=args.parquet, energy_limit=args.energy_limit, creation_limit=args.creation_limit)
     print(format_summary(run.summary))
     print(f"results: {run.folder}")
     return EXIT_OK
@@ -146,6 +149,50 @@ def cmd_accuracy(args) -> int:
                                     stop_time=args.stop_time, overwrite=args.overwrite)
     print(markdown(study))
     print(f"written: {folder} (study wall time {time.perf_counter() - t0:.0f} s)")
+    return EXIT_OK
+
+
+def cmd_spectrum(args) -> int:
+    from .apps.spectra import period_grid, record_spectra, summary_lines, write_spectrum
+
+    try:
+        periods = period_grid(args.periods)
+        spectra = record_spectra(args.records, periods, args.damping, fmt=args.format, dt=args.dt, units=args.units,
+                                 target_pga_g=args.pga)
+    except ValueError as exc:   # a record, a period or the damping: the input's fault
+        raise BadInput(str(exc)) from None
+    out = args.out if args.out is not None else Path("out") / "spectra"
+    out.mkdir(parents=True, exist_ok=True)
+    stem = "_".join(s.name for s in spectra) + f"_zeta{args.damping:g}"
+    paths = write_spectrum(spectra, out, stem, plot=not args.no_plots)
+    print("\n".join(summary_lines(spectra)))
+    print("written: " + ", ".join(str(p) for p in paths))
+    return EXIT_OK
+
+
+def cmd_separation(args) -> int:
+    from .apps.separation_scene import format_separations, scene_separations, write_separations
+    from .files import output_target
+    from .master import Catalog, load_scene
+
+    overrides = _overrides(args.overrides)
+    name = load_scene(args.scene, overrides).name
+    default = args.out is None
+    out = output_target(Path("out") / f"{name}_separation" if default else args.out, overwrite=args.overwrite,
+                        default=default)   # refused before the runs, not after them
+    with Catalog(_fmu_dir(args.fmu_dir)) as catalog:
+        try:
+            rows = scene_separations(args.scene, overrides, args.records, args.pga, check=not args.no_check,
+                                     method=args.method, catalog=catalog)
+        except ValueError as exc:   # SceneError, a record that cannot be read: the input's fault
+            raise BadInput(str(exc)) from None
+    print(format_separations(rows))
+    folder = write_separations(rows, out, plots=not args.no_plots, overwrite=args.overwrite, default=default)
+    print(f"results: {folder}")
+    failed = [r for r in rows if r.check is not None and not r.check.passed]
+    if failed:
+        print(f"warning: {len(failed)} check(s) failed: the co-simulation did not confirm contact at 0.99 S and none "
+              f"at 1.01 S", file=sys.stderr)
     return EXIT_OK
 
 
@@ -268,7 +315,7 @@ def cmd_build_fmus(args) -> int:
     if unknown:
         raise BadInput(f"unknown FMU {sorted(unknown)}; known: {sorted(FMU_NAMES)}")
     out = args.out if args.out is not None else fmu_folder()
-    print(f"Building FMUs into {out}")
+    print(f"FMUs in {out}:")
     build_all(out, force=args.force, names=tuple(args.names) or None, quiet=False)
     return EXIT_OK
 
@@ -304,6 +351,17 @@ def cmd_opensees(args) -> int:
 
 
 # -- the parser ------------------------------------------------------------------------------------
+def _fraction(text: str) -> float:
+    """A fraction 0 < value < 1 (argparse type): refused with the value and the range otherwise."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (allowed: 0 < value < 1)") from None
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is outside the allowed range 0 < value < 1")
+    return value
+
+
 def _scene_options(p: argparse.ArgumentParser, run: bool = True) -> None:
     from .master.coupling import STRATEGIES
 
@@ -326,6 +384,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     """The parser and its subcommands' parsers (by name)."""
     from .apps.study.spec import MAX_CASES as STUDY_MAX_CASES
     from .fmus import FMU_NAMES
+    from .master.results import ENERGY_CREATION_LIMIT, ENERGY_RESIDUAL_LIMIT
     from .master.limits import DEFAULT_MAX_STEPS
     from .master.runner import DEFAULT_SCENE
     from .peers.opensees import MATERIALS
@@ -360,6 +419,13 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                    help="largest number of communication steps a run may take, planned or refined "
                         "(default %(default)s); raise it on purpose for a longer run")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--parquet", action="store_true",
+                   help="also write history.parquet (units and descriptions in the column metadata)")
+    p.add_argument("--energy-limit", type=_fraction, default=ENERGY_RESIDUAL_LIMIT, metavar="FRACTION",
+                   help="warn when |energy residual| exceeds this fraction of the input energy (default: %(default)g)")
+    p.add_argument("--creation-limit", type=_fraction, default=ENERGY_CREATION_LIMIT, metavar="FRACTION",
+                   help="warn that the run created energy when the residual is below minus this fraction of the "
+                        "input energy (default: %(default)g)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.add_argument("--list", action="store_true", help="list the bundled scenes and exit")
     p.add_argument("--accuracy", action="store_true",
@@ -380,6 +446,44 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--out", type=Path, help="result folder: new or empty (default: out/<scene>_accuracy, numbered "
                                             "when taken)")
     _overwrite_option(p)
+
+    from fmu_src.ground_records import FORMATS, UNITS
+    from fmu_src.response_spectrum import DEFAULT_DAMPING
+
+    p = add("spectrum", cmd_spectrum, "elastic response spectra of records (displacement, pseudo-velocity, "
+                                      "pseudo-acceleration): a CSV table and a log-log plot")
+    p.add_argument("records", nargs="+", metavar="RECORD",
+                   help="bundled record name (elcentro1940 kobe1995 sanfernando1971 parkfield1966) or a file")
+    p.add_argument("--damping", type=float, default=DEFAULT_DAMPING, help="damping ratio (default %(default)s)")
+    p.add_argument("--periods", nargs="+", metavar="T",
+                   help="periods in s, or START:STOP:NUM log-spaced (default 0.02:10:100)")
+    p.add_argument("--pga", type=float, metavar="G", help="scale each record to this PGA in g (default: as recorded)")
+    p.add_argument("--format", choices=FORMATS, default="auto", help="file format (default %(default)s)")
+    p.add_argument("--dt", type=float, help="sampling interval in s of a single-column file")
+    p.add_argument("--units", choices=sorted(UNITS), default="g", help="units of the file's values (default g)")
+    p.add_argument("--out", type=Path, help="folder for <records>_zeta<damping>.csv/.png (default out/spectra); "
+                                            "existing files are never replaced")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plot")
+
+    p = add("separation", cmd_separation,
+            "the separation that avoids pounding at each level of a scene, per record, beside the code rules "
+            "(ABS, SRSS, EC8 0.7 SRSS, DDC) from histories and spectra, checked by co-simulation at 0.99 and "
+            "1.01 times it")
+    p.add_argument("scene", help="scene file or bundled scene name")
+    p.add_argument("--records", nargs="+", metavar="RECORD",
+                   help="records to use instead of the scene's (bundled names or files; the scene's scaling applies)")
+    p.add_argument("--pga", type=float, metavar="G", help="scale every record to this PGA in g")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="INSTANCE.VAR=VALUE",
+                   help="scene override, as for run (repeatable)")
+    p.add_argument("--method", choices=("exact", "bisection"),
+                   help="exact (linear buildings at rest, the default where it applies) or bisection on the gap "
+                        "with co-simulation runs (any building)")
+    p.add_argument("--no-check", action="store_true", help="skip the co-simulation runs at 0.99 and 1.01 times the gap")
+    p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
+    p.add_argument("--out", type=Path, help="result folder: new or empty (default: out/<scene>_separation, numbered "
+                                            "when taken)")
+    _overwrite_option(p)
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plot")
 
     p = add("export-ssp", cmd_export_ssp, "write a scene as an SSP 1.0 package (FMUs included)")
     p.add_argument("scene", help="scene file or bundled scene name")

@@ -27,6 +27,7 @@ package a per-user cache, ``$XDG_CACHE_HOME/pounding-cosim/fmus/<version>-<hash>
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 import os
 import shutil
@@ -95,16 +96,46 @@ def fmu_spec(name: str) -> FmuSpec:
 
 
 # -- what goes into an FMU ---------------------------------------------------------------------------
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's bytes: what summaries and studies record of the FMUs and records
+    a run used.  Kept per (path, size, modification time): a study hashes each FMU once."""
+    path = Path(path)
+    stat = path.stat()
+    return _sha256(str(path.absolute()), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _sha256(path: str, size: int, mtime_ns: int) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def fmu_hashes(fmu_dir: str | Path, names: Sequence[str] = FMU_NAMES) -> dict[str, str]:
+    """``{name: SHA-256 of <fmu_dir>/<name>.fmu}``."""
+    return {n: file_sha256(Path(fmu_dir) / f"{n}.fmu") for n in names}
+
+
 def _relative_imports(path: Path) -> list[str]:
     """Modules of the same package that ``path`` imports (``from .x import ...``)."""
+    stat = path.stat()
+    return list(_parsed_imports(str(path), stat.st_mtime_ns, stat.st_size))
+
+
+@functools.lru_cache(maxsize=256)
+def _parsed_imports(path: str, mtime_ns: int, size: int) -> tuple[str, ...]:
+    # Every run checks that its FMUs are up to date, which walks the sources' imports: parsing a
+    # file once per version (keyed by its modification time and size) saves ~0.2 s per run.
     names = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(ast.parse(Path(path).read_text(encoding="utf-8"))):
         if isinstance(node, ast.ImportFrom) and node.level == 1:
             if node.module:
                 names.append(node.module.split(".")[0])
             else:
                 names.extend(alias.name for alias in node.names)
-    return names
+    return tuple(names)
 
 
 def fmu_modules(spec: FmuSpec, source: Path = SOURCE) -> list[str]:
@@ -200,6 +231,12 @@ class {spec.class_name}(_Slave):
 
 
 # -- building ------------------------------------------------------------------------------------------
+def up_to_date(spec: FmuSpec, out: Path | str, source: Path = SOURCE) -> bool:
+    """True when ``out`` holds ``spec``'s FMU built from the current sources (its stamp matches)."""
+    target, stamp = Path(out) / f"{spec.name}.fmu", Path(out) / f".{spec.name}.sha256"
+    return target.exists() and stamp.exists() and stamp.read_text() == source_digest(spec, source)
+
+
 def build_one(spec: FmuSpec, out: Path | str, force: bool = False, source: Path = SOURCE) -> Path:
     """Build one FMU into ``out`` unless an up-to-date one is there; returns its path."""
     from fmu_src.fmi_slave import HOST_REQUIREMENTS
@@ -209,7 +246,7 @@ def build_one(spec: FmuSpec, out: Path | str, force: bool = False, source: Path 
     digest = source_digest(spec, source)
     target = out / f"{spec.name}.fmu"
     stamp = out / f".{spec.name}.sha256"
-    if not force and target.exists() and stamp.exists() and stamp.read_text() == digest:
+    if not force and up_to_date(spec, out, source):
         return target
     out.mkdir(parents=True, exist_ok=True)
     package = package_name(spec, digest)
@@ -255,9 +292,11 @@ def build_all(out: Path | str | None = None, force: bool = False, names: Sequenc
     for spec in FMUS:
         if names is not None and spec.name not in names:
             continue
+        skipped = not force and up_to_date(spec, out)
         built[spec.name] = build_one(spec, out, force=force)
         if not quiet:
-            print(f"  {spec.name + '.fmu':<20} {spec.summary}  -> {built[spec.name]}")
+            state = "up to date, not rebuilt" if skipped else "built"
+            print(f"  {spec.name + '.fmu':<20} {spec.summary}  -> {built[spec.name]} ({state})")
     return built
 
 

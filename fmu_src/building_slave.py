@@ -33,7 +33,7 @@ E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kineti
 """
 from __future__ import annotations
 
-import copy
+import functools
 import math
 
 import numpy as np
@@ -60,7 +60,9 @@ _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 # doubles to every FMU; the margin only absorbs a host that rounds times differently).
 _KNOT_TIME_TOL = 1e-9
 # Outputs computed from the state when read (none of them is needed to advance the state).
-_DERIVED = ("V", "mu", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak")
+# (rows of one block, N_MAX wide, filled at the first read after a step: x_peak, drift_peak and
+# a_peak are the state's running peaks in one copy)
+_DERIVED = ("V", "drift_residual", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
 
 
 class Building(Fmi2Slave):
@@ -161,27 +163,37 @@ class Building(Fmi2Slave):
             return super()._element_getter(attr, idx)
 
         def get():
-            if self._state is None or idx >= self._n:
+            if self._state is None:
                 return 0.0
             return float(self._derived()[attr][idx])
         return get
 
+    def _array_reader(self, attr):
+        if attr not in _DERIVED:
+            return functools.partial(getattr, self, attr)
+        return functools.partial(self._derived_array, attr)
+
+    def _derived_array(self, attr: str) -> np.ndarray:
+        """A derived output whole (N_MAX elements, 0 above n_storeys), as its element getters read it."""
+        if self._state is None:
+            return np.zeros(N_MAX)
+        return self._derived()[attr]
+
     def _derived(self) -> dict[str, np.ndarray]:
-        cached = self._derived_cache
-        if cached is None:
-            state, integ = self._state, self._integrator
+        """The derived outputs of the current state by name, rows of one block N_MAX wide (0 above
+        n_storeys), filled at the first read after a step (readers copy what they read at once)."""
+        if self._derived_cache is None:
+            state, integ, n = self._state, self._integrator, self._n
             integ.resolve_peaks(state, self.cost)      # the in-step peak searches left to do
-            heights = self.storey_height[:self._n]
-            cached = self._derived_cache = {
-                "V": integ.storey_shear(state),
-                "drift_residual": integ.residual_drift(state),
-                "x_peak": state.peak_x,
-                "drift_peak": state.peak_drift,
-                "a_peak": state.peak_accel,
-                "drift_ratio_peak": state.peak_drift / heights,
-                "mu": state.peak_drift * self._inv_yield_drift,
-            }
-        return cached
+            block = self._derived_block
+            block[0, :n] = integ.storey_shear(state)
+            if integ.hysteresis.inelastic:              # a linear storey has no residual drift: 0
+                block[1, :n] = integ.residual_drift(state)
+            block[2:5, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
+            np.divide(state.peak_drift, self.storey_height[:n], out=block[5, :n])
+            np.multiply(state.peak_drift, self._inv_yield_drift, out=block[6, :n])
+            self._derived_cache = self._derived_rows
+        return self._derived_cache
 
     def _set_fmu_state(self, state):
         super()._set_fmu_state(state)
@@ -222,6 +234,8 @@ class Building(Fmi2Slave):
         with np.errstate(divide="ignore"):
             self._inv_yield_drift = np.where(fy > 0.0, building.stiffnesses / np.where(fy > 0.0, fy, 1.0), 0.0)
         self._y = np.zeros(3 * n + 1)  # work buffer [u; v; ag; f]
+        self._derived_block = np.zeros((len(_DERIVED), N_MAX))
+        self._derived_rows = dict(zip(_DERIVED, self._derived_block))
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
         self._steps = {}
@@ -232,7 +246,7 @@ class Building(Fmi2Slave):
     def _publish(self, force) -> None:
         """Outputs from the state (the integrator path and initialisation)."""
         n, state = self._n, self._state
-        drift, V, accel, strain = self._integrator.response(state, force)
+        drift, V, accel, strain = self._integrator.response(state, force, acceleration=not self._legacy)
         self.x[:n] = state.u
         self.v[:n] = state.v
         self.drift[:n] = drift
@@ -295,13 +309,15 @@ class Building(Fmi2Slave):
             return
         n = self._n
         f = self.F[:n]
+        # one reduction instead of a per-element test; a sum that is not finite is looked at closely
+        finite = math.isfinite(f.sum()) or bool(np.isfinite(f).all())
         if knots is None:
             ag = float(self.ag)
-            if not (math.isfinite(ag) and np.isfinite(f).all()):
+            if not (math.isfinite(ag) and finite):
                 raise SlaveError(self._non_finite_input(ag, f))
             times, values = (0.0, step_size), (ag, ag)
         else:
-            if not np.isfinite(f).all():
+            if not finite:
                 raise SlaveError(self._non_finite_input(0.0, f))
             if self._free_mass:
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
@@ -310,8 +326,7 @@ class Building(Fmi2Slave):
         state = self._state
         # what to restore if the step is refused: the integrators replace the state's fields,
         # never change them in place, except the list of deferred peak searches
-        before = copy.copy(state)
-        before.pending = list(state.pending)
+        before = state.shallow()
         try:
             cost = self._integrator.advance(state, times, values, f)
         except ValueError as exc:
@@ -414,7 +429,9 @@ class Building(Fmi2Slave):
                              f"2 <= n_knots <= {KNOT_CAPACITY}")
         times = self.t_knot[:count]
         values = self.ag_knot[:count]
-        if not (np.isfinite(times).all() and np.isfinite(values).all()):
+        # (a sum that is not finite is looked at element by element)
+        if not math.isfinite(float(times.sum()) + float(values.sum())) and not (
+                np.isfinite(times).all() and np.isfinite(values).all()):
             for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
                 bad = np.flatnonzero(~np.isfinite(arr))
                 if bad.size:
@@ -434,5 +451,6 @@ class Building(Fmi2Slave):
                              f"t_knot[{i + 2}] = {times[i + 1]:.9g} s")
         rel[0] = 0.0
         rel[-1] = h
-        np.clip(rel, 0.0, h, out=rel)
+        np.maximum(rel, 0.0, out=rel)    # np.clip's arithmetic without its Python overhead
+        np.minimum(rel, h, out=rel)
         return rel, values.copy()

@@ -24,7 +24,7 @@ class does the FMI bookkeeping that pythonfmu leaves to the author:
   - an instance refused at initialisation refuses every step with the same message;
 
 * FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``) includes the private
-  attributes listed in ``PRIVATE_STATE``, deep-copied, so that a restored
+  attributes listed in ``PRIVATE_STATE``, copied (:func:`snapshot`), so that a restored
   instance continues exactly as the saved one.  A state freed twice by the host, or used
   after it was freed, is refused at the next state call instead of corrupting the process
   (:class:`_SavedStates`);
@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import functools
 import math
 import operator
 import sys
@@ -75,6 +76,9 @@ MAX_STEP = 1e6
 #: a step must also change the time: h >= TIME_RESOLUTION |t| (t + h distinct from t, with
 #: six bits to spare)
 TIME_RESOLUTION = 64 * 2.220446049250313e-16
+#: value-reference lists whose fmi2GetReal/fmi2SetReal plan an instance remembers (a master
+#: uses a handful, the same every step); beyond that the plans are dropped and rebuilt
+MAX_ACCESS_PLANS = 64
 
 
 @dataclass(frozen=True)
@@ -162,12 +166,69 @@ def array(name: str, count: int, **kwargs) -> tuple[Variable, ...]:
     )
 
 
+#: values an FMU state keeps as they are: nothing can change them in place
+_IMMUTABLE = (float, int, str, bytes, type(None), np.generic)
+
+
+def snapshot(value: Any) -> Any:
+    """A copy of one attribute for an FMU state, as independent of the live one as a deep copy.
+
+    Immutable values are kept, a numeric numpy array is copied, an object with a ``snapshot()``
+    method gives its own copy (a slave's state object that knows which of its parts can change,
+    e.g. :class:`fmu_src.building_response.BuildingState`), anything else is deep-copied.  A
+    deep copy of every attribute cost 0.4-0.7 ms per fmi2GetFMUstate of building.fmu (most of
+    it ``copy.deepcopy`` walking the list of deferred peak searches), which a master that saves
+    states for rollback paid hundreds of times per run.
+    """
+    if isinstance(value, _IMMUTABLE):
+        return value
+    if type(value) is np.ndarray and value.dtype != object:
+        return value.copy()
+    own = getattr(value, "snapshot", None)
+    if own is not None:
+        return own()
+    return copy.deepcopy(value)
+
+
+@dataclass(frozen=True)
+class _AccessPlan:
+    """How one fmi2GetReal/fmi2SetReal value-reference list is served (:meth:`SlaveBase.get_real`).
+
+    ``arrays``: per array, ``(reader or attribute name, element selector, position selector)``
+    (a selector is a slice where the numbers form an arithmetic progression, else a list);
+    ``scalars``: runs of plain scalar attributes, ``(attrgetter, slice of positions)``;
+    ``single``: ``(getter or setter, position)`` of every other variable.
+    """
+
+    arrays: tuple
+    scalars: tuple
+    single: tuple
+
+
+def _selector(numbers: list[int]) -> slice | list[int]:
+    """A slice selecting ``numbers`` (ascending, evenly spaced), or the list itself."""
+    if len(numbers) == 1:
+        return slice(numbers[0], numbers[0] + 1)
+    step = numbers[1] - numbers[0]
+    if step > 0 and all(b - a == step for a, b in zip(numbers, numbers[1:])):
+        return slice(numbers[0], numbers[-1] + 1, step)
+    return list(numbers)
+
+
+def _attrgetter(names: list[str]) -> Callable[[Any], tuple]:
+    """``operator.attrgetter`` of the names, returning a tuple even for one."""
+    if len(names) > 1:
+        return operator.attrgetter(*names)
+    get = operator.attrgetter(names[0])
+    return lambda obj: (get(obj),)
+
+
 class SlaveError(Exception):
     """An error that a slave reports through FMI status and the log."""
 
 
 class _SavedState(dict):
-    """One saved FMU state (the attributes, deep-copied): a dict, as pythonfmu expects."""
+    """One saved FMU state (the attributes, copied by :func:`snapshot`): a dict, as pythonfmu expects."""
 
     __slots__ = ("__weakref__",)
 
@@ -242,6 +303,9 @@ class SlaveBase(Fmi2Slave):
         self._t_next: float | None = None   # s, where the next step must start (None: anywhere)
         self._initialized = False            # True after fmi2ExitInitializationMode succeeded
         self._saved = _SavedStates()
+        # what an FMU state holds (one tuple: fmi2GetFMUstate must not rebuild it each call)
+        names = [v.attribute for v in self.VARIABLES] + list(self.PRIVATE_STATE) + ["_error", "_t_next"]
+        self._state_attributes = tuple(dict.fromkeys(names))
         # pythonfmu looks _set_fmu_state up on the instance: the checks run first (see there)
         self._set_fmu_state = self._checked_set_state
         # (variable, attribute, index) triples, resolved once: do_step runs thousands of times
@@ -270,6 +334,110 @@ class SlaveBase(Fmi2Slave):
         scalars = [a for _, a, i in self._real_outputs if i is None]
         self._scalar_outputs = operator.attrgetter(*scalars) if len(scalars) > 1 else None
         self._array_outputs = sorted({a for _, a, i in self._real_outputs if i is not None})
+        self._declared = {v.name: v for v in self.VARIABLES}
+        self._read_plans: dict[tuple[int, ...], list] = {}
+        self._write_plans: dict[tuple[int, ...], list] = {}
+
+    # -- fmi2GetReal / fmi2SetReal: one plan per value-reference list -----------------------------
+    # pythonfmu calls one getter or setter per value (about 0.5 us each: a dict look-up, a type
+    # test, a lambda, getattr, a numpy scalar); a master reads and writes the same lists at every
+    # step (building.fmu: 12-62 outputs; 33 knot times and values, interleaved).  So each list is
+    # turned once into a plan (:class:`_AccessPlan`): the elements of one array are read or
+    # written together, through a slice where they form one (the interleaved knots: two strided
+    # slices); consecutive plain scalars are read by one attrgetter; any variable whose access a
+    # subclass customises keeps its own getter or setter.  The values are the doubles pythonfmu's
+    # path gives (tests/test_access_plans.py).
+    def get_real(self, vrs):
+        key = tuple(vrs)
+        plan = self._read_plans.get(key)
+        if plan is None:
+            plan = self._access_plan(key, write=False)
+            if plan is None:
+                return super().get_real(vrs)     # not every one a Real: pythonfmu's TypeError
+        out = [0.0] * len(key)
+        for read, index, where in plan.arrays:
+            values = read()[index].tolist()
+            if type(where) is slice:
+                out[where] = values
+            else:
+                for position, value in zip(where, values):
+                    out[position] = value
+        for getter, where in plan.scalars:
+            out[where] = map(float, getter(self))
+        for getter, position in plan.single:
+            out[position] = float(getter())
+        return out
+
+    def set_real(self, vrs, values):
+        key = tuple(vrs)
+        plan = self._write_plans.get(key)
+        if plan is None:
+            plan = self._access_plan(key, write=True)
+            if plan is None:
+                return super().set_real(vrs, values)
+        for setter, position in plan.single:
+            setter(values[position])
+        for attr, index, where in plan.arrays:
+            getattr(self, attr)[index] = values[where] if type(where) is slice else [values[p] for p in where]
+        return None
+
+    def _access_plan(self, key: tuple[int, ...], write: bool) -> "_AccessPlan | None":
+        """The plan of ``key`` (see above), remembered; None to leave the call to pythonfmu (a value
+        reference that is not a Real, one without a setter, or one given twice in a write)."""
+        if write and len(set(key)) < len(key):
+            return None                    # pythonfmu's order decides which value stays
+        arrays: dict[str, tuple[Any, list[int], list[int]]] = {}
+        scalars: list[list] = []           # runs of consecutive plain scalars: [names, first, stop]
+        single: list[tuple[Callable, int]] = []
+        for position, vr in enumerate(key):
+            var = self.vars.get(vr)
+            if not isinstance(var, Real):
+                return None
+            decl = self._declared.get(var.name)
+            attr, idx = (decl.attribute, decl.index) if decl is not None else (None, None)
+            access = None
+            if idx is not None:
+                if write:
+                    access = attr if decl.causality == "input" and self._plain_element_setter(attr) else None
+                else:
+                    access = self._array_reader(attr)
+            if access is not None:
+                group = arrays.setdefault(attr, (access, [], []))
+                group[1].append(idx)
+                group[2].append(position)
+            elif write:
+                if var.setter is None:
+                    return None            # pythonfmu's own error for a variable without a setter
+                single.append((var.setter, position))
+            elif attr is not None and idx is None and self._scalar_getter(attr) is None:
+                if scalars and scalars[-1][2] == position:
+                    scalars[-1][0].append(attr)
+                    scalars[-1][2] = position + 1
+                else:
+                    scalars.append([[attr], position, position + 1])
+            else:
+                single.append((var.getter, position))
+        plan = _AccessPlan(
+            arrays=tuple((access, _selector(index), _selector(where)) for access, index, where in arrays.values()),
+            scalars=tuple((_attrgetter(names), slice(first, stop)) for names, first, stop in scalars),
+            single=tuple(single))
+        plans = self._write_plans if write else self._read_plans
+        if len(plans) >= MAX_ACCESS_PLANS:
+            plans.clear()
+        plans[key] = plan
+        return plan
+
+    def _array_reader(self, attr: str) -> Callable[[], np.ndarray] | None:
+        """A function giving the array ``attr`` whole, each element as its getter gives it (for
+        :meth:`get_real`), or None to call the element getters one by one.  A subclass that
+        overrides :meth:`_element_getter` overrides this too (until then: element by element)."""
+        if type(self)._element_getter is not SlaveBase._element_getter:
+            return None
+        return functools.partial(getattr, self, attr)
+
+    def _plain_element_setter(self, attr: str) -> bool:
+        """True if setting an element of the input array ``attr`` only stores the value."""
+        return type(self)._element_setter is SlaveBase._element_setter
 
     # -- declaration ---------------------------------------------------------------------------
     def _register(self, var: Variable) -> None:
@@ -511,8 +679,8 @@ class SlaveBase(Fmi2Slave):
         if problem:
             self._refuse(f"{self.instance_name}: {problem}", disable=False)
         state = _SavedState()
-        for attr in {v.attribute for v in self.VARIABLES} | set(self.PRIVATE_STATE) | {"_error", "_t_next"}:
-            state[attr] = copy.deepcopy(getattr(self, attr))
+        for attr in self._state_attributes:
+            state[attr] = snapshot(getattr(self, attr))
         return self._saved.add(state)
 
     def _checked_set_state(self, state: dict[str, Any]) -> None:
@@ -531,4 +699,4 @@ class SlaveBase(Fmi2Slave):
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
         """Restore a saved state (a subclass may extend it; the checks are in :meth:`_checked_set_state`)."""
         for attr, value in state.items():
-            setattr(self, attr, copy.deepcopy(value))
+            setattr(self, attr, snapshot(value))

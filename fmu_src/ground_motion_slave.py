@@ -10,6 +10,13 @@ its first and after its last sample): ``ag`` at ``t + h``, ``ag_mean`` the mean 
 (what a zero-order-hold building needs: its velocity increments are then exact), the ground
 velocity ``vg`` and displacement ``dg`` at ``t + h``.
 
+Scaling: ``scale``, or one target: ``target_pga`` (m/s^2), ``target_pga_g`` (g) or ``target_sa``
+(m/s^2), the pseudo-spectral acceleration at ``sa_period`` (s) with damping ``sa_damping``.  Two
+targets at once, or ``target_sa`` without ``sa_period``, are refused at
+``fmi2ExitInitializationMode`` before the file is read.  Outputs ``scale_factor`` (what was
+applied) and ``sa_at_period`` (PSa of the played record at ``sa_period``, 0 without a period).
+A record whose PGA is implausible for its stated unit is played, with a warning in the log.
+
 Knots (``n_knots``, ``t_knot[k]``, ``ag_knot[k]``, k = 1..KNOT_CAPACITY): the record over the
 last step ``[t, t + h]`` exactly, as the polyline through ``(t, ag(t+))``, every sample strictly
 inside and ``(t + h, ag(t + h-))`` (a jump where the record starts or ends is two knots at one
@@ -21,11 +28,15 @@ not read them does not pay for them).
 """
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
+from pythonfmu.enums import Fmi2Status
+
 from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
-from .ground_records import FORMATS, UNITS, load_record
+from .ground_records import FORMATS, G, MAX_PGA_G, UNITS, record_from_parameters, scaling_conflict
 from .record_knots import KNOT_CAPACITY, step_knots
+from .response_spectrum import DEFAULT_DAMPING, PERIOD_LIMITS, pseudo_acceleration
 
 
 class GroundMotion(Fmi2Slave):
@@ -40,9 +51,18 @@ class GroundMotion(Fmi2Slave):
         Variable("dt", start=0.0, unit="s", low=0.0,
                  description="sampling interval of a single-column file; 0 = from the file"),
         Variable("units", "String", start="g", choices=tuple(UNITS), description="units of the values in the file"),
-        Variable("scale", start=1.0, description="factor on the record (ignored if target_pga > 0)"),
-        Variable("target_pga", start=0.0, unit="m/s2", low=0.0,
-                 description="scale the record to this peak ground acceleration; 0 = use scale"),
+        Variable("scale", start=1.0, description="factor on the record (ignored when a target is set)"),
+        Variable("target_pga", start=0.0, unit="m/s2", low=0.0, high=MAX_PGA_G * G,
+                 description="scale the record to this peak ground acceleration; 0 = not set"),
+        Variable("target_pga_g", start=0.0, unit="1", low=0.0, high=MAX_PGA_G,
+                 description="scale the record to this peak ground acceleration in g (a ratio to 9.80665 m/s2); 0 = not set"),
+        Variable("target_sa", start=0.0, unit="m/s2", low=0.0, high=MAX_PGA_G * G,
+                 description="scale the record to this pseudo-spectral acceleration at sa_period; 0 = not set"),
+        Variable("sa_period", start=0.0, unit="s", low=0.0, high=PERIOD_LIMITS[1],
+                 description=f"oscillator period of target_sa and sa_at_period ({PERIOD_LIMITS[0]:g} s or "
+                             f"longer); 0 = none"),
+        Variable("sa_damping", start=DEFAULT_DAMPING, unit="1", low=0.0, high=1.0, high_open=True,
+                 description="damping ratio of the oscillator of target_sa and sa_at_period"),
         Variable("time_shift", start=0.0, unit="s", description="time of the first sample"),
         Variable("ag", causality="output", unit="m/s2", description="ground acceleration at the end of the step"),
         Variable("ag_mean", causality="output", unit="m/s2", description="mean ground acceleration over the last step"),
@@ -52,6 +72,10 @@ class GroundMotion(Fmi2Slave):
         Variable("duration", causality="output", unit="s", description="record length (npts - 1) dt"),
         Variable("t_end", causality="output", unit="s",
                  description="time of the last sample (time_shift + duration); zero motion afterwards"),
+        Variable("scale_factor", causality="output", unit="1",
+                 description="factor applied to the record's values (after the unit conversion)"),
+        Variable("sa_at_period", causality="output", unit="m/s2",
+                 description="pseudo-spectral acceleration of the played record at sa_period (0 if none)"),
         Variable("n_knots", "Integer", causality="output", start=0,
                  description=f"knots of the last step in t_knot/ag_knot (2..{KNOT_CAPACITY}); 0 = none "
                              f"(before the first step, or a step spanning more record samples: use ag_mean)"),
@@ -85,6 +109,15 @@ class GroundMotion(Fmi2Slave):
             return getattr(self, attr)[idx]
         return get
 
+    def _array_reader(self, attr):
+        if attr not in self._KNOTS:
+            return functools.partial(getattr, self, attr)
+
+        def read():
+            self._fill_knots()
+            return getattr(self, attr)
+        return read
+
     def _fill_knots(self) -> None:
         if self._knot_step is None:
             return
@@ -104,17 +137,31 @@ class GroundMotion(Fmi2Slave):
     def setup_experiment(self, start_time, stop_time, tolerance):
         self._start_time = float(start_time or 0.0)
 
+    def validate(self):
+        conflict = scaling_conflict(self.target_pga, self.target_pga_g, self.target_sa)
+        if conflict:
+            yield conflict
+        if self.target_sa > 0.0 and self.sa_period == 0.0:
+            yield f"target_sa = {self.target_sa!r} m/s2 needs sa_period (s), the period it applies at"
+        if 0.0 < self.sa_period < PERIOD_LIMITS[0]:
+            yield (f"sa_period = {self.sa_period!r} s is outside the allowed range "
+                   f"{PERIOD_LIMITS[0]:g} <= sa_period <= {PERIOD_LIMITS[1]:g} (or 0 = none)")
+
     def initialize(self) -> None:
+        parameters = {v.name: getattr(self, v.name) for v in self.VARIABLES if v.causality == "parameter"}
         try:
-            record = load_record(self.record, fmt=self.format, dt=self.dt or None, units=self.units,
-                                 scale=self.scale, target_pga=self.target_pga or None,
-                                 time_shift=self.time_shift, records_dir=self._records_dir())
+            record = record_from_parameters(parameters, records_dir=self._records_dir())
         except ValueError as exc:  # RecordError names the file and line
             raise SlaveError(f"record = {self.record!r}: {exc}") from None
+        for warning in record.warnings:
+            self.log(f"{self.instance_name}: record = {self.record!r}: {warning}", Fmi2Status.warning)
         self._record = record
         self.pga = record.pga
         self.duration = record.duration
         self.t_end = record.end_time
+        self.scale_factor = record.scale_factor
+        self.sa_at_period = (pseudo_acceleration(record.acceleration, record.dt, self.sa_period, self.sa_damping)
+                             if self.sa_period > 0.0 else 0.0)
         t = self._start_time
         self.ag = self.ag_mean = record.at(t)
         self.vg = record.velocity(t)

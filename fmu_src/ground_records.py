@@ -17,20 +17,49 @@ that is a property of the data, not of the integration.
 * a two-column ``time, acceleration`` CSV (header optional; the time step must be uniform),
 
 converts units at this edge (``g`` = 9.80665 m/s^2, ``m/s2``, ``cm/s2``) and raises
-:class:`RecordError` naming the file and the line for every problem.
+:class:`RecordError` naming the file, the line and the value as written for every problem.
+
+Files are text in UTF-8 (with or without a byte-order mark), UTF-16 (with a byte-order mark,
+or ASCII text with every other byte zero) or Latin-1.  Before anything is read a file must be a
+regular file of at most ``MAX_RECORD_BYTES``, and a record holds at most ``MAX_RECORD_SAMPLES``
+samples: a device such as ``/dev/zero`` or a huge file is refused at once, never read into memory.
+A record whose PGA in its stated unit is outside ``PLAUSIBLE_PGA_G`` carries a warning in
+:attr:`Record.warnings` (e.g. a record in cm/s^2 read as g).
+
+Scaling (:func:`scale_factor`): ``scale``, or exactly one target, ``target_pga`` (m/s^2),
+``target_pga_g`` (g) or ``target_sa`` (m/s^2, the pseudo-spectral acceleration at ``sa_period``
+with damping ``sa_damping``, :mod:`fmu_src.response_spectrum`).  A scaled PGA above
+``MAX_PGA_G`` is refused.
 """
 from __future__ import annotations
 
+import codecs
 import csv
+import io
 import math
 import re
+import stat
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
+from typing import Iterator, Mapping
 
 import numpy as np
 
 G = 9.80665  # standard gravity (m/s^2), the "g" of strong-motion records
+#: Largest record file read (bytes).  A million samples written as AT2 (about 15 characters
+#: each) or as a "time, acceleration" CSV (about 25) fit; anything larger is not a record.
+MAX_RECORD_BYTES = 32 * 2 ** 20
+#: Most samples in one record: 200 samples/s for 5000 s (a long-period record is ~60,000).
+MAX_RECORD_SAMPLES = 1_000_000
+#: PGA range (g) of real strong-motion records in their stated unit; outside it a record is
+#: most likely read in the wrong unit (cm/s^2 read as g is 981 times too strong).
+PLAUSIBLE_PGA_G = (0.001, 5.0)
+#: Largest PGA (g) a scaled record may have: far beyond any recorded motion (the seed paper's
+#: Fig 8b goes to 15 g), small enough that every integral of the record stays finite.
+MAX_PGA_G = 100.0
+#: The scaling targets: at most one may be set (> 0) at a time; 0 or None means not set.
+SCALING_TARGETS = ("target_pga", "target_pga_g", "target_sa")
 UNITS = MappingProxyType({"g": G, "m/s2": 1.0, "cm/s2": 0.01})
 _UNIT_ALIASES = MappingProxyType({
     "g": "g", "m/s2": "m/s2", "m/s^2": "m/s2", "m/s/s": "m/s2", "cm/s2": "cm/s2",
@@ -71,6 +100,10 @@ class Record:
         Who recorded and processed it (to be shown with results).
     start_time : float
         Time of the first sample (s); ``load_record(time_shift=...)`` sets it.
+    scale_factor : float
+        Factor applied to the values of the file after the unit conversion (1 if unscaled).
+    warnings : tuple of str
+        Doubts about the data that do not stop a run (an implausible PGA for the stated unit).
     """
 
     name: str
@@ -79,6 +112,8 @@ class Record:
     source: str = ""
     credit: str = ""
     start_time: float = 0.0
+    scale_factor: float = 1.0
+    warnings: tuple[str, ...] = ()
 
     def __post_init__(self):
         a = np.array(self.acceleration, dtype=float).reshape(-1)
@@ -135,7 +170,8 @@ class Record:
         """The same record with every sample multiplied by ``factor``."""
         if not math.isfinite(factor):
             raise ValueError(f"scale factor {factor!r} is not finite")
-        return replace(self, acceleration=self.acceleration * float(factor))
+        return replace(self, acceleration=self.acceleration * float(factor),
+                       scale_factor=self.scale_factor * float(factor))
 
     def shifted(self, time_shift: float) -> "Record":
         """The same record starting ``time_shift`` (s) later (earlier if negative)."""
@@ -267,23 +303,85 @@ def _read_manifest() -> MappingProxyType:
 BUNDLED = _read_manifest()
 
 
-# -- parsers --------------------------------------------------------------------------------------
-def _lines(path: Path) -> list[str]:
+# -- reading files --------------------------------------------------------------------------------
+_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+
+
+def _decode(path: Path, raw: bytes) -> str:
+    """Text of a record file: UTF-8 (BOM optional), UTF-16 (BOM, or ASCII with zero bytes), Latin-1."""
+    if raw.startswith(codecs.BOM_UTF8):
+        encoding, body = "utf-8", raw[len(codecs.BOM_UTF8):]
+    elif raw.startswith(_UTF16_BOMS):
+        encoding, body = "utf-16", raw               # the codec reads the BOM for the byte order
+    elif b"\x00" in raw[:4096]:
+        # UTF-16 without a BOM: ASCII digits leave every other byte zero
+        head = raw[:4096]
+        if head[1::2].count(0) > 0.9 * len(head[1::2]):
+            encoding, body = "utf-16-le", raw
+        elif head[0::2].count(0) > 0.9 * len(head[0::2]):
+            encoding, body = "utf-16-be", raw
+        else:
+            raise RecordError(path, None, "holds zero bytes but is not UTF-16 text: not a record file")
+    else:
+        try:
+            return raw.decode("utf-8")
+        except UnicodeDecodeError:
+            return raw.decode("latin-1")             # old files with a degree sign in a header
     try:
-        raw = path.read_bytes()
+        text = body.decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise RecordError(path, None, f"is not valid {encoding.upper()} text (byte {exc.start}: "
+                                      f"{exc.reason})") from None
+    return text.lstrip("\ufeff")
+
+
+class _Text:
+    """The decoded text of a record file; its lines are produced lazily, numbered from 1."""
+
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.text = text
+
+    def lines(self) -> Iterator[tuple[int, str]]:
+        for number, line in enumerate(io.StringIO(self.text, newline=None), start=1):
+            yield number, line.rstrip("\n")
+
+    def head(self, count: int) -> list[str]:
+        out = []
+        for _, line in self.lines():
+            if len(out) == count:
+                break
+            out.append(line)
+        return out
+
+
+def _read(path: Path, max_bytes: int = MAX_RECORD_BYTES) -> _Text:
+    """Check that ``path`` is a regular file within the size limit, then read and decode it."""
+    try:
+        info = path.stat()
     except FileNotFoundError:
         raise RecordError(path, None, "file not found") from None
-    except IsADirectoryError:
-        raise RecordError(path, None, "is a directory, not a record file") from None
     except OSError as exc:
         raise RecordError(path, None, f"cannot be read: {exc.strerror}") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise RecordError(path, None, "is a directory, not a record file")
+    if not stat.S_ISREG(info.st_mode):
+        raise RecordError(path, None, "is not a regular file (a device, pipe or socket): "
+                                      "a record must be a text file")
+    limit = f"the limit of a record file is {max_bytes / 2 ** 20:g} MiB ({MAX_RECORD_SAMPLES:,} samples)"
+    if info.st_size > max_bytes:
+        raise RecordError(path, None, f"is {info.st_size / 2 ** 20:.1f} MiB; {limit}")
     try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    return text.splitlines()  # handles LF, CRLF and CR
+        with path.open("rb") as fh:
+            raw = fh.read(max_bytes + 1)            # a file growing while read is still bounded
+    except OSError as exc:
+        raise RecordError(path, None, f"cannot be read: {exc.strerror}") from None
+    if len(raw) > max_bytes:
+        raise RecordError(path, None, f"is larger than {max_bytes / 2 ** 20:g} MiB; {limit}")
+    return _Text(path, _decode(path, raw))
 
 
+# -- parsers --------------------------------------------------------------------------------------
 def _number(path: Path, lineno: int, token: str) -> float:
     try:
         value = float(token.replace("D", "E").replace("d", "e"))
@@ -292,6 +390,14 @@ def _number(path: Path, lineno: int, token: str) -> float:
     if not math.isfinite(value):
         raise RecordError(path, lineno, f"{token!r} is not a finite number")
     return value
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token.replace("D", "E").replace("d", "e"))
+    except ValueError:
+        return False
+    return True
 
 
 def _numbers(path: Path, lineno: int, line: str) -> list[float]:
@@ -305,8 +411,13 @@ def _numbers(path: Path, lineno: int, line: str) -> list[float]:
     return values
 
 
-def _parse_at2(path: Path, lines: list[str]):
+def _too_many(path: Path, lineno: int) -> RecordError:
+    return RecordError(path, lineno, f"more than {MAX_RECORD_SAMPLES:,} samples, the limit of a record")
+
+
+def _parse_at2(path: Path, text: _Text):
     """PEER NGA .AT2 -> (samples, dt, units or None)."""
+    lines = text.head(5)
     if len(lines) < 5:
         raise RecordError(path, len(lines) or None,
                           f"an AT2 file has 4 header lines and data; this one has {len(lines)} line(s)")
@@ -322,90 +433,120 @@ def _parse_at2(path: Path, lines: list[str]):
     line4 = lines[3]
     m = _NPTS_DT.search(line4)
     if m:
-        npts, dt = int(m.group(1)), _number(path, 4, m.group(2))
+        npts_text, dt_text = m.group(1), m.group(2)
     else:  # NGA-West1 style: "4164    0.0100    NPTS, DT" -> first integer, next float
         tokens = _NUMBER.findall(line4)
         ints = [i for i, tok in enumerate(tokens) if re.fullmatch(r"\d+", tok)]
         if not ints or ints[0] + 1 >= len(tokens):
             raise RecordError(path, 4, f"expected 'NPTS= <n>, DT= <s> SEC' or '<n> <dt> NPTS, DT', found {line4.strip()!r}")
-        npts, dt = int(tokens[ints[0]]), _number(path, 4, tokens[ints[0] + 1])
+        npts_text, dt_text = tokens[ints[0]], tokens[ints[0] + 1]
+    dt = _number(path, 4, dt_text)
+    npts = int(npts_text)
+    if npts > MAX_RECORD_SAMPLES:
+        raise RecordError(path, 4, f"NPTS = {npts_text} is more than {MAX_RECORD_SAMPLES:,} samples, "
+                                   f"the limit of a record")
     if not dt > 0.0:
-        raise RecordError(path, 4, f"DT = {dt!r} s must be > 0")
+        raise RecordError(path, 4, f"DT = {dt_text} s must be > 0")
     values: list[float] = []
     last = 4
-    for lineno, line in enumerate(lines[4:], start=5):
-        if line.strip():
-            values.extend(_numbers(path, lineno, line))
-            last = lineno
-            if len(values) > npts:
-                raise RecordError(path, lineno, f"more values than NPTS = {npts} (header line 4)")
+    for lineno, line in text.lines():
+        if lineno <= 4 or not line.strip():
+            continue
+        values.extend(_numbers(path, lineno, line))
+        last = lineno
+        if len(values) > npts:
+            raise RecordError(path, lineno, f"more values than NPTS = {npts} (header line 4)")
     if len(values) != npts:
         raise RecordError(path, last, f"{len(values)} values, but NPTS = {npts} (header line 4)")
     return np.array(values), dt, units
 
 
-def _parse_column(path: Path, lines: list[str]):
+def _parse_column(path: Path, text: _Text):
     values = []
-    for lineno, line in enumerate(lines, start=1):
-        text = line.split("#", 1)[0].strip()
-        if not text:
+    for lineno, line in text.lines():
+        data = line.split("#", 1)[0].strip()
+        if not data:
             continue
-        tokens = text.replace(",", " ").split()
+        tokens = data.replace(",", " ").split()
         if len(tokens) != 1:
             raise RecordError(path, lineno, f"a single-column file has one value per line; found {len(tokens)} "
-                                            f"({text!r}); use format='csv' for time,acceleration columns")
+                                            f"({data!r}); use format='csv' for time,acceleration columns")
         values.append(_number(path, lineno, tokens[0]))
+        if len(values) > MAX_RECORD_SAMPLES:
+            raise _too_many(path, lineno)
     return np.array(values)
 
 
-def _parse_csv(path: Path, lines: list[str]):
-    """Two columns ``t, a`` -> (samples, dt, first time)."""
-    times, values, linenos = [], [], []
-    for lineno, line in enumerate(lines, start=1):
-        text = line.strip()
-        if not text or text.startswith("#"):
+def _cells(text: str) -> list[str]:
+    return [c.strip() for c in re.split(r"[,;\t]|\s+", text) if c.strip()]
+
+
+def _parse_csv(path: Path, text: _Text):
+    """Two columns ``t, a`` -> (samples, dt, first time).
+
+    Lines above the data are a header only when none of their cells is a number (``time, acc``);
+    any other line is data, so no row is ever dropped.
+    """
+    times, values, linenos, written = [], [], [], []
+    for lineno, line in text.lines():
+        data = line.strip()
+        if not data or data.startswith("#"):
             continue
-        cells = [c.strip() for c in re.split(r"[,;\t]|\s+", text) if c.strip()]
-        if not times and not values:
-            try:
-                float(cells[0])
-            except ValueError:
-                continue  # header line
+        cells = _cells(data)
+        if not times and not any(_is_number(c) for c in cells):
+            continue                                 # a header line above the data: no cell is a number
         if len(cells) != 2:
-            raise RecordError(path, lineno, f"expected 2 columns (time, acceleration), found {len(cells)}: {text!r}")
+            raise RecordError(path, lineno, f"expected 2 columns (time, acceleration), found {len(cells)}: {data!r}")
         times.append(_number(path, lineno, cells[0]))
         values.append(_number(path, lineno, cells[1]))
         linenos.append(lineno)
+        written.append(cells[0])
+        if len(times) > MAX_RECORD_SAMPLES:
+            raise _too_many(path, lineno)
     if len(times) < 2:
         raise RecordError(path, linenos[-1] if linenos else None, f"{len(times)} data row(s); at least 2 are needed")
     t = np.array(times)
+    step = np.diff(t)
+    back = np.flatnonzero(step <= 0.0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise RecordError(path, linenos[i], f"time {written[i]} s does not increase "
+                                            f"(line {linenos[i - 1]}: {written[i - 1]} s)")
+    # A missing or repeated sample is a jump at its own line: compare each step with the typical
+    # one.  1 % of dt is far above the round-off of times written with a few decimals.
+    typical = float(np.median(step))
+    jump = np.flatnonzero(np.abs(step - typical) > 1e-2 * typical)
+    if jump.size:
+        i = int(jump[0]) + 1
+        raise RecordError(path, linenos[i], f"time jumps from {written[i - 1]} s (line {linenos[i - 1]}) to "
+                                            f"{written[i]} s, a step of {float(step[i - 1]):.6g} s; the record's "
+                                            f"time step is {typical:.6g} s")
     dt = float(t[-1] - t[0]) / (len(t) - 1)
-    if not dt > 0.0:
-        raise RecordError(path, linenos[-1], "time does not increase")
     # Times written with a few decimals deviate from the grid by round-off only; 0.1 % of dt
-    # accepts that and rejects any real gap or repeated sample.
+    # accepts that and rejects a slow drift of the time step.
     off = np.abs(t - (t[0] + dt * np.arange(len(t))))
     bad = np.flatnonzero(off > 1e-3 * dt)
     if bad.size:
         i = int(bad[0])
-        raise RecordError(path, linenos[i], f"non-uniform time step: t = {t[i]!r} s, expected {t[0] + i * dt:.9g} s "
-                                            f"on the uniform grid dt = {dt:.9g} s")
+        raise RecordError(path, linenos[i], f"non-uniform time step: t = {written[i]} s, expected "
+                                            f"{t[0] + i * dt:.9g} s on the uniform grid dt = {dt:.9g} s")
     return np.array(values), dt, float(t[0])
 
 
-def _sniff(path: Path, lines: list[str]) -> str:
+def _sniff(path: Path, text: _Text) -> str:
     suffix = path.suffix.lower()
     if suffix == ".at2":
         return "at2"
     if suffix == ".csv":
         return "csv"
+    lines = text.head(20)
     head = "\n".join(lines[:5]).upper()
     if "NPTS" in head or "PEER" in head:
         return "at2"
-    for line in lines[:20]:
-        text = line.split("#", 1)[0].strip()
-        if text:
-            return "csv" if len(re.split(r"[,;\t]|\s+", text)) == 2 else "column"
+    for line in lines:
+        data = line.split("#", 1)[0].strip()
+        if data:
+            return "csv" if len(re.split(r"[,;\t]|\s+", data)) == 2 else "column"
     return "column"
 
 
@@ -416,9 +557,82 @@ def _unit_name(units: str) -> str:
     return key
 
 
+def _plausibility(record: "Record", units: str) -> tuple[str, ...]:
+    """A warning when the PGA in the stated unit is outside ``PLAUSIBLE_PGA_G``."""
+    low, high = PLAUSIBLE_PGA_G
+    pga_g = record.pga_g
+    if low <= pga_g <= high:
+        return ()
+    what = "all samples are zero" if pga_g == 0.0 else f"its PGA read with units = {units!r} is {pga_g:.4g} g"
+    return (f"{record.source}: {what}, outside {low:g}-{high:g} g of real strong-motion records: "
+            f"check units (a record in cm/s2 read as g is {G * 100:.0f} times too strong)",)
+
+
+# -- scaling ----------------------------------------------------------------------------------------
+def _given(value) -> bool:
+    return value is not None and value != 0.0
+
+
+def scaling_conflict(target_pga=None, target_pga_g=None, target_sa=None) -> str | None:
+    """Why a set of scaling targets is not allowed (more than one set, > 0), or None."""
+    values = dict(target_pga=target_pga, target_pga_g=target_pga_g, target_sa=target_sa)
+    chosen = [f"{k} = {v!r}" for k, v in values.items() if _given(v)]
+    if len(chosen) > 1:
+        return (f"at most one of {', '.join(SCALING_TARGETS)} may be set; got {' and '.join(chosen)} "
+                f"(set the others to 0)")
+    return None
+
+
+def scale_factor(record: "Record", scale: float = 1.0, target_pga: float | None = None,
+                 target_pga_g: float | None = None, target_sa: float | None = None,
+                 sa_period: float | None = None, sa_damping: float | None = None) -> float:
+    """The factor that scales ``record`` as asked (see module docstring).
+
+    ``target_pga`` (m/s^2) or ``target_pga_g`` (g): PGA after scaling.  ``target_sa`` (m/s^2):
+    pseudo-spectral acceleration at ``sa_period`` (s) with damping ``sa_damping`` (default 0.05)
+    after scaling.  With no target, ``scale``.  A target of 0 or None is not set.
+    """
+    from .response_spectrum import DEFAULT_DAMPING, pseudo_acceleration
+
+    conflict = scaling_conflict(target_pga, target_pga_g, target_sa)
+    if conflict:
+        raise ValueError(conflict)
+    for name, value in (("target_pga", target_pga), ("target_pga_g", target_pga_g), ("target_sa", target_sa)):
+        if _given(value) and not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} = {value!r} must be finite and > 0 (0 = not set)")
+    source = record.source or record.name
+    if _given(target_sa):
+        if not _given(sa_period):
+            raise ValueError(f"target_sa = {target_sa!r} m/s^2 needs the period sa_period (s) it applies at")
+        damping = DEFAULT_DAMPING if sa_damping is None else sa_damping
+        sa = pseudo_acceleration(record.acceleration, record.dt, sa_period, damping)
+        if sa == 0.0:
+            raise RecordError(source, None, "all samples are zero: cannot scale to a target PSa")
+        factor = target_sa / sa
+    elif _given(target_pga) or _given(target_pga_g):
+        if record.pga == 0.0:
+            raise RecordError(source, None, "all samples are zero: cannot scale to a target PGA")
+        factor = (target_pga if _given(target_pga) else target_pga_g * G) / record.pga
+    else:
+        factor = float(scale)
+        if not math.isfinite(factor):
+            raise ValueError(f"scale = {scale!r} is not finite")
+    pga_g = abs(factor) * record.pga_g
+    if pga_g > MAX_PGA_G:
+        if factor == 1.0:
+            raise ValueError(f"{source}: its PGA is {pga_g:.6g} g, above the limit of {MAX_PGA_G:g} g: check "
+                             f"units (a record in cm/s2 read as g is {G * 100:.0f} times too strong), or scale it")
+        raise ValueError(f"{source}: scaling by {factor:.6g} gives a PGA of {pga_g:.6g} g, above the limit "
+                         f"of {MAX_PGA_G:g} g")
+    return factor
+
+
+# -- loading ----------------------------------------------------------------------------------------
 def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "g", scale: float = 1.0,
                 target_pga: float | None = None, time_shift: float = 0.0,
-                records_dir: str | Path | None = None) -> Record:
+                records_dir: str | Path | None = None, *, target_pga_g: float | None = None,
+                target_sa: float | None = None, sa_period: float | None = None,
+                sa_damping: float | None = None) -> Record:
     """Load a ground acceleration record in SI units.
 
     Parameters
@@ -433,9 +647,11 @@ def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "
     units : {"g", "m/s2", "cm/s2"}
         Units of the values in the file (an AT2 header states its own; they must agree).
     scale : float
-        Factor applied to the samples (ignored when ``target_pga`` is given).
-    target_pga : float, optional
-        Scale the record so that its PGA is this value (m/s^2); ``None`` or ``<= 0``: no target.
+        Factor applied to the samples (ignored when a target is given).
+    target_pga, target_pga_g, target_sa, sa_period, sa_damping : float, optional
+        Scale the record to a PGA (m/s^2, or g) or to a pseudo-spectral acceleration (m/s^2) at
+        ``sa_period`` (s) with damping ``sa_damping`` (-, default 0.05); at most one target;
+        ``None`` or 0 means not set (:func:`scale_factor`).
     time_shift : float
         The first sample is at ``t = time_shift`` (s); negative values skip the beginning.
     records_dir : path, optional
@@ -446,6 +662,9 @@ def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "
     if fmt not in FORMATS:
         raise ValueError(f"format = {fmt!r} is not allowed: one of {', '.join(FORMATS)}")
     unit = _unit_name(units)
+    conflict = scaling_conflict(target_pga, target_pga_g, target_sa)
+    if conflict:  # before reading anything
+        raise ValueError(conflict)
     if dt is not None and not (math.isfinite(dt)):
         raise ValueError(f"dt = {dt!r} s is not finite")
     given_dt = dt if dt is not None and dt > 0.0 else None
@@ -457,24 +676,24 @@ def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "
         path = Path(records_dir) / meta.file if records_dir is not None else meta.path
         if unit != meta.units:
             raise RecordError(path, None, f"bundled record {key!r} is in {meta.units}; units = {units!r} contradicts it")
-        samples = _parse_column(path, _lines(path))
+        samples = _parse_column(path, _read(path))
         if samples.size != meta.npts:
             raise RecordError(path, None, f"{samples.size} samples, the manifest says {meta.npts}")
         file_dt, name, credit = meta.dt, key, meta.credit
     else:
         path = Path(spec)
-        lines = _lines(path)
-        kind = _sniff(path, lines) if fmt == "auto" else fmt
+        text = _read(path)
+        kind = _sniff(path, text) if fmt == "auto" else fmt
         name = path.stem
         file_dt = None
         if kind == "at2":
-            samples, file_dt, file_units = _parse_at2(path, lines)
+            samples, file_dt, file_units = _parse_at2(path, text)
             if file_units != unit:
                 raise RecordError(path, 3, f"the header states units of {file_units}, but units = {units!r} was given")
         elif kind == "csv":
-            samples, file_dt, start = _parse_csv(path, lines)
+            samples, file_dt, start = _parse_csv(path, text)
         else:
-            samples = _parse_column(path, lines)
+            samples = _parse_column(path, text)
             if given_dt is None:
                 raise RecordError(path, None, "a single-column file has no time step: give dt (s)")
         if samples.size < 2:
@@ -484,12 +703,20 @@ def load_record(spec, fmt: str = "auto", dt: float | None = None, units: str = "
     record = Record(name=name, dt=file_dt if file_dt is not None else given_dt,
                     acceleration=samples * UNITS[unit], source=str(path), credit=credit,
                     start_time=start + float(time_shift))
-    if target_pga is not None and target_pga > 0.0:
-        if not math.isfinite(target_pga):
-            raise ValueError(f"target_pga = {target_pga!r} m/s^2 is not finite")
-        if record.pga == 0.0:
-            raise RecordError(path, None, "all samples are zero: cannot scale to a target PGA")
-        return record.scaled(target_pga / record.pga)
-    if scale != 1.0:
-        return record.scaled(scale)
-    return record
+    record = replace(record, warnings=_plausibility(record, unit))
+    factor = scale_factor(record, scale, target_pga, target_pga_g, target_sa, sa_period, sa_damping)
+    return record.scaled(factor) if factor != 1.0 else record
+
+
+def record_from_parameters(parameters: Mapping, records_dir: str | Path | None = None) -> Record:
+    """The record ``ground_motion.fmu`` plays for these parameter values (FMI names, every one given).
+
+    One mapping from the FMU's parameters to :func:`load_record`, used by the FMU and by the
+    master's reference solver alike.
+    """
+    p = parameters
+    return load_record(p["record"], fmt=p["format"], dt=float(p["dt"]) or None, units=p["units"],
+                       scale=float(p["scale"]), target_pga=float(p["target_pga"]) or None,
+                       time_shift=float(p["time_shift"]), records_dir=records_dir,
+                       target_pga_g=float(p["target_pga_g"]) or None, target_sa=float(p["target_sa"]) or None,
+                       sa_period=float(p["sa_period"]) or None, sa_damping=float(p["sa_damping"]))

@@ -61,6 +61,10 @@ class Pounding(Fmi2Slave):
         Variable("resolve_impacts", type="Boolean", start=True,
                  description="true: locate and integrate impacts inside each step; false: force law on the "
                              "current inputs only"),
+        Variable("graze_depth", start=0.0, unit="m", low=0.0,
+                 description="a contact whose penetration stays below this is a graze: counted in grazes, not in "
+                             "impacts (0: every contact is an impact; building scenes use 3e-4, three times the "
+                             "co-simulation's resolution of the relative floor position, docs/contact_models.md)"),
         Variable("host", type="String", start="any", choices=tuple(HOSTS),
                  description="how the host applies F, if it declares it: 'zoh' exact for a force held over the "
                              "step in Gauss-Seidel order (building.fmu), 'zoh_late' the same one step late "
@@ -97,7 +101,18 @@ class Pounding(Fmi2Slave):
         Variable("E_dissipated", start=0.0, unit="J", **_OUT,
                  description="energy dissipated by all impacts so far (the current one up to now)"),
         Variable("impacts", type="Integer", start=0, **_OUT,
-                 description="number of impacts begun so far"),
+                 description="number of impacts so far: contacts whose penetration reached graze_depth "
+                             "(counted when it does)"),
+        Variable("grazes", type="Integer", start=0, **_OUT,
+                 description="number of completed contacts whose penetration stayed below graze_depth"),
+        Variable("contacts_ended", type="Integer", start=0, **_OUT,
+                 description="number of completed contacts, impacts and grazes (one more at each separation)"),
+        Variable("t_onset", start=0.0, unit="s", **_OUT,
+                 description="time at which the latest contact began"),
+        Variable("F_peak", start=0.0, unit="N", **_OUT,
+                 description="largest instantaneous force of the latest contact (so far, while in progress)"),
+        Variable("t_peak", start=0.0, unit="s", **_OUT,
+                 description="time of F_peak (resolved mode: located to an internal step; plain mode: a step start)"),
         Variable("v_impact", start=0.0, unit="m/s", **_OUT,
                  description="approach speed of the latest impact (latched at contact onset)"),
         Variable("CR_achieved", start=0.0, unit="1", **_OUT,
@@ -126,7 +141,9 @@ class Pounding(Fmi2Slave):
     def initialize(self) -> None:
         law = law_for(self.model, self.k, self.n, self.m1, self.m2, self.CR, self.zeta)
         self.zeta_used = law.zeta
-        self._contact = ImpactResolver(law, host=self.host) if self.resolve_impacts else PlainContact(law)
+        depth = float(self.graze_depth)
+        self._contact = (ImpactResolver(law, host=self.host, graze_depth=depth) if self.resolve_impacts
+                         else PlainContact(law, graze_depth=depth))
         self._watch = PlausibilityWatch(law)
 
     def step(self, current_time: float, step_size: float) -> None:
@@ -135,6 +152,7 @@ class Pounding(Fmi2Slave):
         discard = self.on_implausible == "discard"
         saved = copy.deepcopy((self._contact, self._watch)) if discard else None
         c = self._contact
+        started = c.started
         if self.resolve_impacts:
             out = c.step(delta, delta_dot, step_size)
             F, impulse, substeps = out.mean_force, out.impulse, out.substeps
@@ -161,6 +179,12 @@ class Pounding(Fmi2Slave):
         self.F_max = c.F_max
         self.E_dissipated = c.dissipated_energy()
         self.impacts = c.impacts
+        self.grazes = c.grazes
+        self.contacts_ended = c.ended
+        if c.started != started:
+            self.t_onset = current_time + c.onset_offset
+        self.F_peak = c.impact_peak
+        self.t_peak = self.t_onset + c.peak_delay()
         self.v_impact = c.v_imp
         self.delta_max = c.delta_max
         self.contact_time = c.impact_time

@@ -121,8 +121,9 @@ class ImpactResolver:
     """
 
     def __init__(self, law: ContactLaw, rtol: float = 1e-8, follow_host: bool = True,
-                 extrapolate: bool = True, host: str = "any"):
+                 extrapolate: bool = True, host: str = "any", graze_depth: float = 0.0):
         self.law = law
+        self.graze_depth = graze_depth   # m: a contact shallower than this is a graze, not an impact
         self.rtol = rtol
         self.follow_host = follow_host
         self.observer = HostObserver(law.m, extrapolate, host)
@@ -145,14 +146,23 @@ class ImpactResolver:
         self.offset = 0.0           # m, apparent overlap left by a resolved impact
         self.delta_end = 0.0        # m, internal penetration at the end of the last step
         self.delta_dot_end = 0.0    # m/s
-        self.started = False        # a step has been taken
+        self.stepped = False        # a step has been taken
         self.ahead = 0.0            # N s, impulse handed over ahead of the internal trajectory (rule 7)
         self.just_separated = False
         self.dtau = 1e-3            # next internal step, scaled
         self.a0 = 0.0               # m/s^2, external relative acceleration at the step start
         self.a1 = 0.0               # m/s^3, its rate over the step
         self.correction = (0.0, 0.0)  # (m, m/s) last correction applied to the internal state
-        self.impacts = 0
+        self.impacts = 0            # contacts that reached graze_depth (counted when they do)
+        self.grazes = 0             # completed contacts that never reached graze_depth
+        self.started = 0            # contacts begun
+        self.ended = 0              # contacts completed (impacts and grazes)
+        self.counted = False        # the current/latest contact is counted as an impact
+        self.onset_offset = 0.0     # s into its step at which the latest contact began
+        self.peak_tau = 0.0         # scaled time from the onset to impact_peak
+        #: None, or a list that receives (contact number, s since its onset, force N, penetration m)
+        #: at every accepted internal point: a contact's own trajectory (the master's replays)
+        self.trace = None
         self.E_completed = 0.0      # J, all completed impacts
         self.F_max = 0.0            # N
         self.impact_peak = 0.0      # N, current/latest impact
@@ -168,6 +178,11 @@ class ImpactResolver:
         v = self.v_imp
         L = self.law.length_scale(v)
         return v, L, L / v, self.law.m * v * v / L
+
+    def peak_delay(self) -> float:
+        """Time (s) from the onset of the latest contact to its largest force (at the sample where
+        it was found, within one internal step of the refined peak)."""
+        return self.peak_tau * self._scales()[2] if self.v_imp > 0.0 else 0.0
 
     def dissipated_energy(self) -> float:
         """Energy dissipated by all impacts so far, the current one up to now [J]; never decreases."""
@@ -224,12 +239,13 @@ class ImpactResolver:
         out.mean_force = out.impulse / h
         if self.follow_host:
             self.observer.record(out.mean_force, h, internal)
-        self.started = True
+        self.stepped = True
         return out
 
     def _probe(self, h: float, span: float) -> float:
         """Impulse [N s] the resolver's own bodies will receive over ``span`` s after this step."""
         probe = copy.copy(self)
+        probe.trace = None          # a look ahead, not the trajectory (a shallow copy shares the list)
         out = StepOutcome()
         probe._advance(h, h + span, probe.delta_end, probe.delta_dot_end, out)
         return max(out.impulse, 0.0)
@@ -292,6 +308,7 @@ class ImpactResolver:
         if not emitted > 0.0:
             return 0.0
         probe = copy.copy(self)
+        probe.trace = None          # a look ahead, not the trajectory (a shallow copy shares the list)
         future, rates = [], [self.delta_dot_end]    # impulses [N s]; rates [m/s] at the step ends
         for j in range(1, _WITHHOLD_HORIZON + 1):
             out = StepOutcome()
@@ -346,18 +363,19 @@ class ImpactResolver:
             v_on = v0 + self._ext_rate(t, s)
             t += s
             self._start(v_on)
+            self.onset_offset = t
             out.impacts_started += 1
 
     def _flight_start(self, delta: float, delta_dot: float):
         """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 5)."""
-        if self.follow_host and self.started and self.observer.pending():
+        if self.follow_host and self.stepped and self.observer.pending():
             # part of an impulse is still on its way to the host: the resolver's own flight
             d0, v0 = self.delta_end, self.delta_dot_end
             self.offset = max(0.0, delta - d0) if delta > 0.0 else 0.0
             if d0 > 0.0:
                 self.offset, d0 = self.offset + d0, 0.0
             return d0, v0
-        if self.follow_host and self.started:
+        if self.follow_host and self.stepped:
             inner = self.delta_end               # internal flight, predicted over the last step
         else:
             inner = self.delta_end if self.just_separated else delta - self.offset
@@ -408,18 +426,34 @@ class ImpactResolver:
         self.sticking = False
         self.v_imp = max(v, MIN_IMPACT_SPEED)
         self.d, self.u, self.e, self.e_top = 0.0, 1.0, 0.0, 0.0
-        self.impacts += 1
+        self.started += 1
+        self.counted = False
         self.impact_peak = 0.0
+        self.peak_tau = 0.0
         self.impact_time = 0.0
         self.delta_max = 0.0
         self._prev = ()
         self.dtau = 1e-3
+        self._count_if_deep()
+
+    def _count_if_deep(self) -> None:
+        """Count the current contact as an impact once its penetration reaches ``graze_depth``
+        (at once when that is 0)."""
+        if not self.counted and self.delta_max >= self.graze_depth:
+            self.counted = True
+            self.impacts += 1
 
     def _finish(self, d: float, u: float, L: float, v: float) -> None:
         """Book a completed impact that separated at scaled (d, u)."""
         n, m = self.law.n, self.law.m
         # a force separation with d > 0 leaves the spring energy of the overlap behind: lost
         e = max(self.e_top, self.e) + (d ** (n + 1.0) / (n + 1.0) if d > 0.0 else 0.0)
+        self._count_if_deep()
+        if not self.counted:
+            self.grazes += 1
+        self.ended += 1
+        if self.trace is not None:        # the separation point (impact_time: the whole contact)
+            self.trace.append((self.started, self.impact_time, 0.0, d * L))
         self.in_contact = False
         self.just_separated = True
         self.last_CR = max(0.0, -u)
@@ -550,6 +584,7 @@ class ImpactResolver:
         self.delta_end = d * L
         self.delta_dot_end = u * v
         self.delta_max = max(self.delta_max, d * L)
+        self._count_if_deep()
         return h
 
     def _holds(self, d: float, alpha: float) -> bool:
@@ -609,6 +644,7 @@ class ImpactResolver:
     def _switch_to_restitution(self, d: float, u: float, L: float) -> None:
         self.approaching = False
         self.delta_max = max(self.delta_max, d * L)
+        self._count_if_deep()
 
     def _event_function(self, event: str):
         if event == "max_penetration":
@@ -642,11 +678,15 @@ class ImpactResolver:
             p, n_ev = self._refine_peak(same[-1], tau - same[-1][0])
             peak, nfev = max(peak, p), nfev + n_ev
         self._prev = (prev + (sample,))[-2:]
+        if self.trace is not None:
+            _, L, T, _ = self._scales()
+            self.trace.append((self.started, tau * T, fs * F0, d * L))
         F = peak * F0
         if F > out.peak_force:
             out.peak_force = F
         if F > self.impact_peak:
             self.impact_peak = F
+            self.peak_tau = tau
         if F > self.F_max:
             self.F_max = F
         return nfev

@@ -15,8 +15,8 @@ from cosim.master.guard import InstabilityError
 from cosim.master.scene import SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("run", "list", "accuracy", "export-ssp", "study", "study-plot", "study-compare", "calibrate", "report",
-            "build-fmus",
+COMMANDS = ("run", "list", "accuracy", "spectrum", "separation", "export-ssp", "study", "study-plot", "study-compare",
+            "calibrate", "report", "build-fmus",
             "cr-table", "fmu-docs", "opensees")
 
 

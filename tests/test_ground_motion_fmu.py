@@ -93,3 +93,57 @@ def test_bad_file_gives_an_error_naming_file_and_line(ground_fmu, tmp_path):
     s = Slave(ground_fmu, "nodt", record=str(ok))
     assert any(f"{ok}: a single-column file has no time step: give dt" in m for m in s.messages), s.messages
     s.close()
+
+
+def test_target_pga_g_and_target_sa_with_their_outputs(ground_fmu):
+    from fmu_src.ground_records import load_record
+    from fmu_src.response_spectrum import response_spectrum
+
+    s = Slave(ground_fmu, "g", record="elcentro1940", target_pga_g=0.3)
+    pga, factor, sa = s.get("pga", "scale_factor", "sa_at_period")
+    assert pga == pytest.approx(0.3 * G, rel=1e-14) and sa == 0.0
+    assert factor == pytest.approx(0.3 * G / load_record("elcentro1940").pga, rel=1e-14)
+    s.close()
+    s = Slave(ground_fmu, "sa", record="kobe1995", target_sa=4.9, sa_period=0.5)
+    factor, sa, ag0 = s.get("scale_factor", "sa_at_period", "ag")
+    assert sa == pytest.approx(4.9, rel=1e-12)
+    out = play(s, 0.02, 2300)                  # the played samples (h = dt) have that PSa
+    played = response_spectrum(np.concatenate([[ag0], out[:, 0]]), 0.02, [0.5])
+    # samples read at t = k h: time round-off ~1e-13 s times the record's slope
+    assert played.pseudo_acceleration[0] == pytest.approx(4.9, rel=1e-9)
+    s.close()
+    # sa_period alone reports the record's PSa without scaling it
+    s = Slave(ground_fmu, "report", record="kobe1995", sa_period=1.0, sa_damping=0.02)
+    factor, sa = s.get("scale_factor", "sa_at_period")
+    rec = load_record("kobe1995")
+    assert factor == 1.0
+    assert sa == pytest.approx(response_spectrum(rec.acceleration, rec.dt, [1.0], 0.02).pseudo_acceleration[0],
+                               rel=1e-15)
+    s.close()
+
+
+@pytest.mark.parametrize("params, message", [
+    (dict(target_pga=2.9, target_pga_g=0.3),
+     "at most one of target_pga, target_pga_g, target_sa may be set; got target_pga = 2.9 and target_pga_g = 0.3"),
+    (dict(target_sa=4.9), "target_sa = 4.9 m/s2 needs sa_period (s), the period it applies at"),
+    (dict(sa_period=1e-4), "sa_period = 0.0001 s is outside the allowed range 0.001 <= sa_period <= 100"),
+    (dict(target_pga=1e300), "target_pga = 1e+300 m/s2 is outside the allowed range 0 <= target_pga <= 980.665"),
+])
+def test_bad_scaling_is_refused_at_exit_initialization(ground_fmu, tmp_path, params, message):
+    never = tmp_path / "never_read.txt"        # the check comes before the file is touched
+    s = Slave(ground_fmu, "bad", record=str(never), dt=0.01, **params)
+    assert any(message in m for m in s.messages), s.messages
+    assert not any("file not found" in m for m in s.messages)
+    with pytest.raises(Exception):
+        s.step(0.01)
+    s.close()
+
+
+def test_implausible_pga_is_played_with_a_logged_warning(ground_fmu, tmp_path):
+    gal = tmp_path / "gal.txt"
+    gal.write_text("0\n30.5\n-12\n0\n")
+    s = Slave(ground_fmu, "gal", record=str(gal), dt=0.01)
+    assert any(f"{gal}: its PGA read with units = 'g' is 30.5 g" in m for m in s.messages), s.messages
+    s.step(0.01)                                # a warning, not an error
+    assert s.get("ag")[0] == pytest.approx(30.5 * G)
+    s.close()

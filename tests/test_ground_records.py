@@ -177,6 +177,7 @@ def at2_with(tmp_path, old, new, name="bad.AT2"):
     (lambda p: at2_with(p, "ACCELERATION TIME SERIES IN UNITS OF G", "VELOCITY IN CM/S"), 3, r"expected 'ACCELERATION"),
     (lambda p: at2_with(p, "NPTS=      7, DT=   .0100 SEC,", "no count here"), 4, r"expected 'NPTS="),
     (lambda p: at2_with(p, "UNITS OF G", "UNITS OF FURLONGS"), 3, r"unknown unit 'FURLONGS'"),
+    (lambda p: at2_with(p, "DT=   .0100 SEC", "DT=   .0000 SEC"), 4, r"DT = \.0000 s must be > 0"),
 ])
 def test_malformed_at2_names_file_and_line(tmp_path, make, line, match):
     path = make(tmp_path)
@@ -200,7 +201,8 @@ def test_malformed_column_and_csv_name_file_and_line(tmp_path):
         load_record(good, fmt="column", dt=0.01)
     gap = tmp_path / "gap.csv"
     gap.write_text("time,acc\n0,0\n0.01,1\n0.03,2\n0.04,3\n0.05,4\n")
-    with pytest.raises(RecordError, match=r"gap\.csv, line 3: non-uniform time step"):
+    # the sample at 0.02 s is missing: the jump is at line 4 (0.03 s), where it was written
+    with pytest.raises(RecordError, match=r"gap\.csv, line 4: time jumps from 0\.01 s \(line 3\) to 0\.03 s"):
         load_record(gap)
     three = tmp_path / "three.csv"
     three.write_text("t,a\n0,1\n0.1,2,3\n")
@@ -223,3 +225,156 @@ def test_missing_file_and_bad_options(tmp_path):
     flat.write_text("0\n0\n0\n")
     with pytest.raises(RecordError, match="cannot scale to a target PGA"):
         load_record(flat, dt=0.01, target_pga=3.0)
+
+
+# -- encodings, limits, honest messages (issue 14) -------------------------------------------------------
+CSV_TEXT = "time,acc\n0,0\n0.02,0.1\n0.04,-6.00E-05\n0.06,0.2\n"
+
+
+@pytest.mark.parametrize("encoding, bom", [("utf-8", b"\xef\xbb\xbf"), ("utf-16-le", b"\xff\xfe"),
+                                           ("utf-16-be", b"\xfe\xff"), ("utf-16-le", b""),
+                                           ("utf-16-be", b"")],
+                         ids=["utf8-bom", "utf16le-bom", "utf16be-bom", "utf16le", "utf16be"])
+@pytest.mark.parametrize("header", [True, False], ids=["header", "headerless"])
+def test_byte_order_marks_and_utf16_read_every_row(tmp_path, encoding, bom, header):
+    text = CSV_TEXT if header else CSV_TEXT.split("\n", 1)[1]
+    path = tmp_path / "rec.csv"
+    path.write_bytes(bom + text.encode(encoding))
+    rec = load_record(path)
+    np.testing.assert_allclose(rec.acceleration, np.array([0, 0.1, -6e-5, 0.2]) * G, rtol=1e-15)
+    assert rec.dt == pytest.approx(0.02, rel=1e-12)
+    col = tmp_path / "rec.txt"
+    col.write_bytes(bom + "0.1\n-0.2\n0.3\n".encode(encoding))
+    np.testing.assert_allclose(load_record(col, dt=0.01).acceleration, np.array([0.1, -0.2, 0.3]) * G)
+
+
+def test_headerless_csv_keeps_its_first_row(tmp_path):
+    """A first row is a header only when none of its cells is a number: Fortran D exponents,
+    a header of two lines, and a row half text half number (an error, not a header)."""
+    path = tmp_path / "d.csv"
+    path.write_text("0.0,1.0D-1\n0.01,2.0D-1\n0.02,0\n")
+    np.testing.assert_allclose(load_record(path).acceleration, np.array([0.1, 0.2, 0.0]) * G)
+    path.write_text("time,acc\ns,g\n0,1\n0.1,2\n")
+    assert load_record(path).npts == 2
+    path.write_text("t,0.5\n0,1\n0.1,2\n")
+    with pytest.raises(RecordError, match=r"d\.csv, line 1: 't' is not a number"):
+        load_record(path)
+
+
+def test_time_jump_reported_at_its_own_line_with_the_value_as_written(tmp_path):
+    rows = [f"{i * 0.01:.2f},{np.sin(i / 7):.5f}" for i in range(1000)]
+    del rows[500]                                  # data row 501 (file line 502) jumps by 2 dt
+    path = tmp_path / "jump.csv"
+    path.write_text("time,acceleration\n" + "\n".join(rows) + "\n")
+    with pytest.raises(RecordError) as info:
+        load_record(path)
+    message = str(info.value)
+    assert info.value.line == 502
+    assert message == (f"{path}, line 502: time jumps from 4.99 s (line 501) to 5.01 s, a step of 0.02 s; "
+                       f"the record's time step is 0.01 s")
+    assert "np." not in message
+    back = tmp_path / "back.csv"
+    back.write_text("0,1\n0.01,2\n0.005,3\n")
+    with pytest.raises(RecordError, match=r"back\.csv, line 3: time 0.005 s does not increase \(line 2: 0.01 s\)"):
+        load_record(back)
+    # steps growing by 6e-7 s each (at most 0.6 % of dt: no jump) drift 7.5 % of dt off the grid
+    drift = tmp_path / "drift.csv"
+    drift.write_text("".join(f"{i * 0.01 + 3e-7 * i * i:.9f},0\n" for i in range(100)))
+    with pytest.raises(RecordError, match=r"drift\.csv, line \d+: non-uniform time step: t = 0\.\d+ s, expected"):
+        load_record(drift)
+
+
+def test_devices_and_oversized_files_are_refused_before_reading(tmp_path, monkeypatch):
+    import fmu_src.ground_records as gr
+
+    with pytest.raises(RecordError, match=r"^/dev/zero: is not a regular file \(a device, pipe or socket\)"):
+        load_record("/dev/zero", dt=0.01)
+    huge = tmp_path / "huge.txt"
+    with huge.open("wb") as fh:                   # sparse: no disk used, and never read
+        fh.truncate(gr.MAX_RECORD_BYTES + 1)
+    with pytest.raises(RecordError, match=r"huge\.txt: is 32\.0 MiB; the limit of a record file is 32 MiB "
+                                          r"\(1,000,000 samples\)"):
+        load_record(huge, dt=0.01)
+    at2 = tmp_path / "many.AT2"
+    at2.write_text(AT2_NEW.replace("NPTS=      7", "NPTS= 2000000"))
+    with pytest.raises(RecordError, match=r"many\.AT2, line 4: NPTS = 2000000 is more than 1,000,000 samples"):
+        load_record(at2)
+    monkeypatch.setattr(gr, "MAX_RECORD_SAMPLES", 3)   # the same check on a small file
+    col = tmp_path / "col.txt"
+    col.write_text("1\n2\n3\n4\n5\n")
+    with pytest.raises(RecordError, match=r"col\.txt, line 4: more than 3 samples, the limit of a record"):
+        load_record(col, dt=0.01)
+    csv_path = tmp_path / "four.csv"
+    csv_path.write_text("t,a\n0,1\n1,2\n2,3\n3,4\n")
+    with pytest.raises(RecordError, match=r"four\.csv, line 5: more than 3 samples"):
+        load_record(csv_path)
+
+
+def test_binary_file_is_refused(tmp_path):
+    path = tmp_path / "blob.txt"
+    path.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(RecordError, match=r"blob\.txt: holds zero bytes but is not UTF-16 text"):
+        load_record(path, dt=0.01)
+
+
+def test_implausible_pga_for_the_stated_unit_warns(tmp_path):
+    gal = tmp_path / "gal.txt"
+    gal.write_text("0\n30.5\n-12\n0\n")                 # a record in cm/s^2 ...
+    wrong = load_record(gal, dt=0.01)                    # ... read as g: 30.5 g, played with a warning
+    assert len(wrong.warnings) == 1
+    assert wrong.warnings[0].startswith(f"{gal}: its PGA read with units = 'g' is 30.5 g, outside 0.001-5 g")
+    assert "cm/s2 read as g" in wrong.warnings[0]
+    assert load_record(gal, dt=0.01, units="cm/s2").warnings == ()          # 0.031 g
+    # the check is on the file's values in the stated unit, before any scaling
+    assert load_record(gal, dt=0.01, target_pga_g=0.3).warnings == wrong.warnings
+    assert load_record(gal, dt=0.01, units="cm/s2", scale=1e-3).warnings == ()
+    low = tmp_path / "low.txt"
+    low.write_text("0\n0.0005\n0\n")
+    assert "is 0.0005 g, outside" in load_record(low, dt=0.01).warnings[0]
+    for name in BUNDLED:
+        assert load_record(name).warnings == ()
+    # beyond MAX_PGA_G (100 g) a record is refused, unless a target scales it
+    gal.write_text("0\n300.5\n-120\n0\n")
+    with pytest.raises(ValueError, match=r"gal\.txt: its PGA is 300.5 g, above the limit of 100 g: check units"):
+        load_record(gal, dt=0.01)
+    assert load_record(gal, dt=0.01, target_pga_g=0.3).pga == pytest.approx(0.3 * G, rel=1e-14)
+
+
+# -- scaling to engineers' targets (issue 15) --------------------------------------------------------------
+def test_target_pga_in_g_and_scale_factor():
+    base = load_record("elcentro1940")
+    rec = load_record("elcentro1940", target_pga_g=0.3)
+    assert rec.pga == pytest.approx(0.3 * G, rel=1e-14)
+    assert rec.scale_factor == pytest.approx(0.3 * G / base.pga, rel=1e-15)
+    np.testing.assert_allclose(rec.acceleration, base.acceleration * rec.scale_factor, rtol=1e-15)
+    assert load_record("elcentro1940", target_pga=0.3 * G).pga == pytest.approx(rec.pga, rel=1e-15)
+
+
+@pytest.mark.parametrize("period, damping", [(0.5, 0.05), (1.0, 0.05), (0.2, 0.02)])
+def test_target_sa_gives_that_pseudo_acceleration(period, damping):
+    from fmu_src.response_spectrum import response_spectrum
+
+    rec = load_record("kobe1995", target_sa=4.9, sa_period=period, sa_damping=damping)
+    spec = response_spectrum(rec.acceleration, rec.dt, [period], damping)  # of the scaled samples
+    assert spec.pseudo_acceleration[0] == pytest.approx(4.9, rel=1e-12)
+    base = response_spectrum(load_record("kobe1995").acceleration, rec.dt, [period], damping)
+    assert rec.scale_factor == pytest.approx(4.9 / base.pseudo_acceleration[0], rel=1e-14)
+
+
+def test_scaling_targets_are_exclusive_and_bounded(tmp_path):
+    with pytest.raises(ValueError, match=r"at most one of target_pga, target_pga_g, target_sa may be set; "
+                                         r"got target_pga = 2.9 and target_sa = 4.9 \(set the others to 0\)"):
+        load_record("elcentro1940", target_pga=2.9, target_sa=4.9, sa_period=0.5)
+    with pytest.raises(ValueError, match=r"target_sa = 4.9 m/s\^2 needs the period sa_period"):
+        load_record("elcentro1940", target_sa=4.9)
+    with pytest.raises(ValueError, match=r"ELC-180\.txt: scaling by 1e\+300 gives a PGA of 3.\d+e\+299 g, "
+                                         r"above the limit of 100 g$"):
+        load_record("elcentro1940", scale=1e300)
+    with pytest.raises(ValueError, match=r"above the limit of 100 g"):
+        load_record("elcentro1940", target_pga=1e300)
+    with pytest.raises(ValueError, match=r"target_pga_g = -1.0 must be finite and > 0"):
+        load_record("elcentro1940", target_pga_g=-1.0)
+    flat = tmp_path / "flat.txt"
+    flat.write_text("0\n0\n0\n")
+    with pytest.raises(RecordError, match="all samples are zero: cannot scale to a target PSa"):
+        load_record(flat, dt=0.01, target_sa=3.0, sa_period=1.0)

@@ -575,3 +575,48 @@ def test_a_long_knot_step_equals_its_intervals_one_by_one():
     for key in ("E_input", "E_damping", "E_external"):
         assert getattr(a, key) == pytest.approx(getattr(s, key), rel=1e-12)
     np.testing.assert_allclose(a.peaks, s.peaks, rtol=1e-9)
+
+
+def test_the_peak_prefilter_bound_dominates_the_hermite_test():
+    """building_response._peaks drops a function when max(|g0|, |g1|) + 4/27 (|d0| + |d1|) plus a
+    1e-12 margin stays under its limit: that must bound what hermite_range_scalar computes,
+    round-off included (random cubics, with end values that nearly cancel the slopes)."""
+    from fmu_src.building_response import _HERMITE_SLOPE_GAIN
+    from fmu_src.linear_response import hermite_range_scalar
+    rng = np.random.default_rng(7)
+    worst = 0.0
+    for scale in (1e-9, 1.0, 1e6):
+        g = rng.normal(size=(20000, 4)) * scale * 10.0 ** rng.integers(-3, 4, size=(20000, 4))
+        g[::3, 1] = g[::3, 0] + 1e-9 * g[::3, 2]           # nearly flat ends, large slopes
+        for g0, g1, d0, d1 in g.tolist():
+            lo, hi = hermite_range_scalar(g0, g1, d0, d1)
+            slopes = abs(d0) + abs(d1)
+            bound = max(abs(g0), abs(g1)) + _HERMITE_SLOPE_GAIN * slopes
+            margin = 1e-12 * (abs(g0) + abs(g1) + slopes)
+            assert max(-lo, hi) <= bound + margin
+            worst = max(worst, (max(-lo, hi) - bound) / (abs(g0) + abs(g1) + slopes))
+    # the bound is reached (to round-off): it is tight, and the margin covers round-off only
+    assert -1e-3 < worst < 1e-14
+
+
+def test_peaks_with_and_without_the_prefilter_are_identical(monkeypatch):
+    """The prefilter of _peaks (active from 16 candidate functions: 6 storeys and up) only skips
+    work: the running peaks and the deferred searches are bit for bit those of the plain tests."""
+    import fmu_src.building_response as response
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * 9.80665 / rec.pga)
+    runs = []
+    for prefilter_from in (response._PREFILTER_FROM, 10 ** 9):
+        monkeypatch.setattr(response, "_PREFILTER_FROM", prefilter_from)
+        b = ShearBuilding.from_period(1.2, [3e5] * 8, [1.0] * 8, 0.05)
+        it = integrator_for(b, StoreyHysteresis("linear", [], 0.05))
+        st = it.initial_state(np.zeros(8), np.zeros(8))
+        deferred = 0
+        for i in range(60):
+            times, values = step_knots(rec, 0.16 * i, 0.16 * (i + 1))
+            deferred += it.advance(st, times - 0.16 * i, values, np.zeros(8)).peaks_deferred
+        pending = [(j, U) for j, U, *_ in st.pending]
+        it.resolve_peaks(st)
+        runs.append((st.peaks.copy(), pending, deferred))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    assert runs[0][1] == runs[1][1] and runs[0][2] == runs[1][2] > 0

@@ -35,8 +35,9 @@ def test_readme_first_command_runs_the_default_scene(capsys, tmp_path, fmu_dir):
     code, stdout, stderr = run_cli(capsys, "--fmu-dir", fmu_dir, "--stop-time", 3, "--out", out)
     assert code == 0, stderr
     assert stdout.startswith("scene default:") and "peak displacement" in stdout and f"results: {out}" in stdout
-    assert {p.name for p in out.iterdir()} == {"history.csv", "summary.json", "displacements.png", "energy.png",
-                                               "contact_force.png", "hysteresis.png", MARKER}
+    assert {p.name for p in out.iterdir()} == {"history.csv", "history_units.csv", "impacts.csv", "summary.json",
+                                               "displacements.png", "energy.png", "contact_force.png",
+                                               "hysteresis.png", MARKER}
     summary = json.loads((out / "summary.json").read_text())
     for key in ("peak_force_N", "impacts", "dissipated_energy_J", "wall_time_s", "communication_steps",
                 "fmu_calls", "rollbacks", "energy_input_J", "energy_residual_J", "energy_residual_relative"):

@@ -185,3 +185,36 @@ def test_scalar_arrays_and_single_elements(tmp_path, catalog):
     scene = load_scene(write(tmp_path, text), catalog=catalog)
     p = scene.instance("left").parameters
     assert [p[f"m[{i}]"] for i in (1, 2, 3)] == [1.0e5] * 3 and p["x0[3]"] == -0.01
+
+
+def test_ground_scaling_targets_as_engineers_write_them(tmp_path, catalog):
+    """target_sa = {period, value[, damping]} and target_pga_g become ground_motion.fmu parameters."""
+    path = write(tmp_path, BASE.replace('record = "elcentro1940"',
+                                        'record = "elcentro1940"\ntarget_sa = {period = 0.5, value = 4.9}'))
+    ground = load_scene(path, catalog=catalog).ground.parameters
+    assert ground["target_sa"] == 4.9 and ground["sa_period"] == 0.5 and "sa_damping" not in ground
+    ground = load_scene(path, ["ground.target_sa={period=1.0, value=3.0, damping=0.02}"],
+                        catalog=catalog).ground.parameters
+    assert (ground["target_sa"], ground["sa_period"], ground["sa_damping"]) == (3.0, 1.0, 0.02)
+    ground = load_scene(path, ["ground.target_sa=0", "ground.target_pga_g=0.3"], catalog=catalog).ground.parameters
+    assert ground["target_pga_g"] == 0.3
+
+
+@pytest.mark.parametrize("ground, overrides, match", [
+    ('target_sa = {period = 0.5}', [],
+     r"t\.toml, line 7: ground\.target_sa = \{'period': 0\.5\}: missing 'value'; write target_sa = "
+     r"\{period = <s>, value = <m/s\^2>\}"),
+    ('target_sa = {period = 0.5, value = 4.9, T = 1}', [], r"t\.toml, line 7: .*unknown key 'T'"),
+    ('target_sa = {period = 0.5, value = 4.9}\nsa_period = 1.0', [],
+     r"t\.toml, line 7: ground\.sa_period is given twice: as sa_period and as target_sa\.period"),
+    ('target_pga = 2.9\ntarget_pga_g = 0.3', [],
+     r"t\.toml, line 8: \[ground\]: at most one of target_pga, target_pga_g, target_sa may be set; "
+     r"got target_pga = 2\.9 and target_pga_g = 0\.3 \(set the others to 0\)"),
+    ('target_pga = 2.9', ["ground.target_sa={period=0.5, value=4.9}"],
+     r"^--set ground\.target_sa=\{period=0\.5, value=4\.9\}: \[ground\]: at most one of"),   # as typed
+])
+def test_bad_scaling_targets_are_one_line_errors(tmp_path, catalog, ground, overrides, match):
+    path = write(tmp_path, BASE.replace('record = "elcentro1940"', 'record = "elcentro1940"\n' + ground))
+    with pytest.raises(SceneError) as info:
+        load_scene(path, overrides, catalog=catalog)
+    assert re.search(match, one_line_error(info)), str(info.value)

@@ -20,6 +20,7 @@ from cosim.master.results import Cost, Summary
 from cosim.master.scene import Override
 from cosim.apps.study import (StudyError, case_id, case_row, load_study, plot_results, read_results,
                          run_study)
+from study_helpers import SMALL, local_client
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,25 +39,8 @@ def write(path: Path, text: str) -> Path:
 
 @pytest.fixture(scope="module")
 def client():
-    from distributed import Client, LocalCluster
+    yield from local_client(n_workers=2, silence_logs=40)
 
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=40)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
-SMALL = """
-name = "small"
-scene = "default"
-[set]
-stop_time = 3.0          # s: El Centro makes the buildings pound within 3 s at these gaps
-[vary]
-"ground.record" = ["elcentro1940", "sanfernando1971"]
-"pounding.gap" = [0.0, 0.01, 0.02]
-"""
 
 
 def test_small_study_matches_single_runs(tmp_path, fmu_dir, client):

@@ -29,20 +29,11 @@ import pytest
 
 from cosim.apps.study import case_row, load_study, read_results, run_study
 from cosim.apps.study.loopback import LoopbackCluster
+from study_helpers import SMALL
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE_COLUMNS = ("wall_time_s", "case_time_s", "worker")   # the only columns that depend on where a case ran
 STUDY_TIMEOUT_S = 120   # a study of these sizes takes seconds; a hang fails the test instead of the session
-
-SMALL = """
-name = "small"
-scene = "default"
-[set]
-stop_time = 3.0          # s: El Centro makes the buildings pound within 3 s at these gaps
-[vary]
-"ground.record" = ["elcentro1940", "sanfernando1971"]
-"pounding.gap" = [0.0, 0.01, 0.02]
-"""
 
 # 12 cases for the faults: the faults are timed by freezing a worker (SIGSTOP) after 3 rows, so
 # that cases remain whatever the machine's speed; each case a few tenths of a second

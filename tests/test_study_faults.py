@@ -22,6 +22,7 @@ import pytest
 
 from cosim.apps.study import MAX_CASES, StudyError, StudyLock, load_study, read_results, run_study
 from cosim.cli import main as cli_main
+from study_helpers import local_client
 
 SLOW = """
 name = "slow"
@@ -92,14 +93,7 @@ def rows_in(csv: Path) -> int:
 
 @pytest.fixture(scope="module")
 def client():
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
-                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=50)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
+    yield from local_client(n_workers=1, silence_logs=50)
 
 
 # -- one writer per folder -------------------------------------------------------------------------

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import json
 import math
 import re
 import tomllib
@@ -19,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from typing import Any, Mapping, Sequence
 
+from fmu_src.ground_records import BUNDLED, SCALING_TARGETS, scaling_conflict
 from fmu_src.hysteresis import StoreyHysteresis
 from fmu_src.shear_building import ShearBuilding
 
@@ -34,6 +36,8 @@ TOP_LEVEL = ("name", "description", "stop_time", "step", "coupling", "output_int
 #: top-level keys a --set may change
 SETTABLE = ("name", "description", "stop_time", "step", "coupling", "output_interval")
 POUNDING_MASTER_KEYS = ("floors", "allow_initial_overlap")
+# target_sa = {period = ..., value = ..., damping = ...} in [ground] -> ground_motion.fmu parameters
+SA_TARGET_KEYS = {"value": "target_sa", "period": "sa_period", "damping": "sa_damping"}
 
 
 def bundled_scenes() -> list[str]:
@@ -69,11 +73,27 @@ def load_scene(name_or_path: str | Path | Mapping[str, Any], overrides: Sequence
     else:
         path = resolve_scene(name_or_path)
         text = path.read_text(encoding="utf-8")
-        try:
-            raw = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise SceneError(f"{path}: invalid TOML: {exc}") from None
+        if path.suffix.lower() == ".json":
+            raw, text = _scene_of_summary(path, text), None
+        else:
+            try:
+                raw = tomllib.loads(text)
+            except tomllib.TOMLDecodeError as exc:
+                raise SceneError(f"{path}: invalid TOML: {exc}") from None
     return _Builder(raw, path, text, interfaces(catalog)).build([as_override(o) for o in overrides])
+
+
+def _scene_of_summary(path: Path, text: str) -> dict:
+    """The scene a run's ``summary.json`` records (``scene_as_run``: :meth:`Scene.as_run`)."""
+    try:
+        summary = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SceneError(f"{path}: invalid JSON: {exc}") from None
+    scene = summary.get("scene_as_run") if isinstance(summary, dict) else None
+    if not isinstance(scene, dict):
+        raise SceneError(f"{path}: a JSON scene must be a run's summary.json with the key 'scene_as_run' "
+                         f"(written by pounding-cosim run); scene files are TOML")
+    return scene
 
 
 class _Builder:
@@ -122,14 +142,14 @@ class _Builder:
         name, description, stop_time, step, coupling = self._settings()
         ground = None
         if "ground" in self.raw:
-            ground = InstanceSpec("ground", GROUND, self._flat_parameters(self.raw["ground"], GROUND, "ground"))
+            ground = InstanceSpec("ground", GROUND, self._ground_parameters(self.raw["ground"]))
         buildings = [InstanceSpec(n, BUILDING, self._building_parameters(n, t)) for n, t in buildings_raw.items()]
         contacts, levels, allow_overlap = self._contacts(buildings)
         self._apply_contact_overrides(contact_overrides, ground, buildings, contacts)
         self._contact_defaults(levels, contacts, buildings)
         scene = Scene(name, description, stop_time, step, coupling, ground, buildings, contacts, levels,
-                      allow_overlap, self.path, dict(self.fmus), output_interval=self._output_interval(),
-                      origins=self._origins())
+                      allow_overlap, self.path, dict(self.fmus), overrides=tuple(o.text for o in overrides),
+                      output_interval=self._output_interval(), origins=self._origins())
         self._check_initial_gaps(scene)
         return scene
 
@@ -233,6 +253,8 @@ class _Builder:
                 raise self.error(f"allow_initial_overlap = {allow_overlap!r} must be true or false",
                                  "allow_initial_overlap", "pounding")
             floors = table.pop("floors", None)
+            # [pounding.<contact instance>]: that level's own parameters (summary.json writes them)
+            own = {k: table.pop(k) for k in list(table) if isinstance(table[k], dict)}
             shared = self._flat_parameters(table, POUNDING, "pounding")
             for left, right in zip(buildings, buildings[1:]):
                 for fl, fr in self._floors(floors, left, right):
@@ -242,6 +264,13 @@ class _Builder:
                         cname = f"pounding_{fl}" + (f"_{fr}" if fr != fl else "")
                     levels.append(ContactLevel(cname, left.name, right.name, fl, fr))
                     contacts.append(InstanceSpec(cname, POUNDING, dict(shared)))
+            names = [c.name for c in contacts]
+            for cname, values in own.items():
+                if cname not in names:
+                    raise self.error(f"pounding.{cname} is a table, but {cname!r} is not a contact instance of "
+                                     f"this scene ({', '.join(names)})", cname, "pounding")
+                contacts[names.index(cname)].parameters.update(
+                    self._flat_parameters(values, POUNDING, f"pounding.{cname}"))
         elif "pounding" in raw:
             unknown = set(raw["pounding"]) - set(POUNDING_MASTER_KEYS)
             self._flat_parameters({k: raw["pounding"][k] for k in unknown}, POUNDING, "pounding")
@@ -335,6 +364,45 @@ class _Builder:
                 raise self.error(f"{where}.{key} = {value!r} must be a single value", key, where)
             out[key] = self._check_value(fmu, where, key, value)
         return out
+
+    def _ground_parameters(self, table: Mapping[str, Any]) -> dict[str, Any]:
+        """``[ground]`` as FMU parameters: ``target_sa = {period = T, value = PSa, damping = z}``
+        becomes ``sa_period``, ``target_sa`` and ``sa_damping``; at most one scaling target."""
+        flat = dict(table)
+        target = flat.get("target_sa")
+        if isinstance(target, dict):
+            del flat["target_sa"]
+            unknown = sorted(set(target) - set(SA_TARGET_KEYS))
+            missing = [k for k in ("period", "value") if k not in target]
+            if unknown or missing:
+                raise self.error(f"ground.target_sa = {target!r}: " + (
+                    f"unknown key {unknown[0]!r}" if unknown else f"missing {missing[0]!r}")
+                    + f"; write target_sa = {{period = <s>, value = <m/s^2>}} (optional damping = <ratio>, "
+                    f"default 0.05)", "target_sa", "ground")
+            for key, parameter in SA_TARGET_KEYS.items():
+                if key in target:
+                    if parameter in flat:
+                        raise self.error(f"ground.{parameter} is given twice: as {parameter} and as "
+                                         f"target_sa.{key}", "target_sa", "ground")
+                    flat[parameter] = target[key]
+        flat = self._flat_parameters(flat, GROUND, "ground")
+        if isinstance(flat.get("record"), str):
+            flat["record"] = self._record_path(flat["record"])
+        conflict = scaling_conflict(**{k: flat.get(k) for k in SCALING_TARGETS})
+        if conflict:
+            given = [k for k in SCALING_TARGETS if flat.get(k)]
+            raise self.error(f"[ground]: {conflict}", given[-1], "ground")
+        return flat
+
+    def _record_path(self, record: str) -> str:
+        """A record file named relative to the scene file (or, given with ``--set``, to the working
+        folder), made absolute: the scene runs the same from any folder.  Bundled names and
+        absolute paths are kept."""
+        if record in BUNDLED or not record or Path(record).is_absolute():
+            return record
+        if self.path is not None and ("ground", "record") not in self.overridden:
+            return str(Path(self.path).parent.absolute() / record)
+        return str(Path(record).absolute())
 
     def _building_parameters(self, name: str, table: Mapping[str, Any]) -> dict[str, Any]:
         where = f"buildings.{name}"

@@ -1,18 +1,22 @@
-"""The physics a scene's instances run, built from their parameters the way the slaves build it.
+"""The physics objects an instance of a scene stands for, built from its parameter values.
 
-The master needs a building's model to prove that a gap stays open over a long step
-(:mod:`cosim.master.gap_bound`); the reference solver needs it to solve the scene itself
-(:func:`cosim.peers.reference.scene_inputs`).  Both build it here, from the values the
-instance has (:meth:`cosim.master.scene.InstanceSpec.value`: the scene's, else the FMU's
-defaults), with the same :class:`fmu_src.shear_building.ShearBuilding` the building FMU's
-``initialize()`` builds.
+The slaves build the same objects in ``initialize()`` from the same values (the scene's, else
+the FMU's defaults: :meth:`cosim.master.scene.InstanceSpec.value`); the master needs them for
+what it reports without asking an FMU (a building's periods, the record a run plays), to prove
+that a gap stays open over a long step (:mod:`cosim.master.gap_bound`), and the monolithic
+reference solver (:func:`cosim.peers.reference.scene_inputs`) for its equations.
 """
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from fmu_src.contact_laws import ContactLaw, law_for
+from fmu_src.ground_records import Record, record_from_parameters
 from fmu_src.shear_building import ShearBuilding
 
+from .interface import parameter_defaults
 from .names import element_name
 
 if TYPE_CHECKING:
@@ -41,8 +45,20 @@ def storeys_are_linear(spec: "InstanceSpec") -> bool:
         return True
 
 
-def initial_state(spec: "InstanceSpec") -> tuple[list[float], list[float]]:
-    """``(x0, v0)`` of the instance's floors (m, m/s, relative to the ground)."""
-    n = int(spec.value("n_storeys"))
-    return ([float(spec.value(element_name("x0", i))) for i in range(1, n + 1)],
-            [float(spec.value(element_name("v0", i))) for i in range(1, n + 1)])
+def initial_state(spec: "InstanceSpec") -> tuple[np.ndarray, np.ndarray]:
+    """Initial floor displacements (m) and velocities (m/s) of a ``building.fmu`` instance."""
+    floors = range(1, int(spec.value("n_storeys")) + 1)
+    return (np.array([float(spec.value(element_name("x0", i))) for i in floors]),
+            np.array([float(spec.value(element_name("v0", i))) for i in floors]))
+
+
+def ground_record(spec: "InstanceSpec") -> Record:
+    """The record a ``ground_motion.fmu`` instance plays (scaled as its parameters say)."""
+    return record_from_parameters({**parameter_defaults(spec.fmu), **spec.parameters})
+
+
+def contact_law(spec: "InstanceSpec") -> ContactLaw:
+    """The contact law of a ``pounding.fmu`` instance."""
+    p = spec.value
+    return law_for(p("model"), float(p("k")), float(p("n")), float(p("m1")), float(p("m2")), float(p("CR")),
+                   float(p("zeta")))

@@ -8,21 +8,28 @@ unwritable path or a full disk is known in a second); :func:`write_results` clai
 """
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
 import numpy as np
 
+from fmu_src.ground_records import G
+
 from ..files import history_bytes, output_target, written_folder, PLOT_BYTES
 from .fmi import raise_pending_interrupt
 from .names import column, element_name
-from .results import SimulationResult, Summary, energy_history, impact_times, summarize
+from .results import (IMPACT_COLUMNS, SimulationResult, Summary, energy_history, impact_table, impact_times,
+                      summarize)
 
 
 def format_summary(summary: Summary) -> str:
     """A short human-readable block for the terminal."""
     s, cost = summary, summary.cost
-    lines = [f"scene {s.scene}: {s.description}".rstrip(": "),
+    lines = [f"scene {s.scene}: {s.system or s.description}".rstrip(": ")]
+    if s.overrides:
+        lines.append(f"  overrides: {', '.join(s.overrides)}")
+    lines += [
              f"  {s.coupling}, h = {s.step_s:g} s, t = 0..{s.stop_time_s:g} s, "
              f"{cost.communication_steps} steps, {cost.fmu_calls} FMI calls, "
              f"wall time {cost.wall_time_s:.3f} s"]
@@ -30,12 +37,17 @@ def format_summary(summary: Summary) -> str:
         lines.append(f"  {name:<10} peak displacement {b.peak_displacement_m:.4g} m (floor "
                      f"{b.peak_displacement_floor}), peak drift {b.peak_drift_m:.4g} m "
                      f"(storey {b.peak_drift_storey})")
+        lines.append(f"  {'':<10} drift ratio {100 * b.peak_drift_ratio:.3g} % (storey "
+                     f"{b.peak_drift_ratio_storey}), floor acceleration {b.peak_acceleration_m_s2 / G:.3g} g "
+                     f"(floor {b.peak_acceleration_floor}){'' if b.peaks_in_step else ', at communication points'}")
         if b.yields:
             lines.append(f"  {'':<10} {b.hysteresis} storeys: peak ductility {b.peak_ductility:.3g} (storey "
                          f"{b.peak_ductility_storey}), residual drift {b.residual_drift_m:.3g} m (storey "
                          f"{b.residual_drift_storey}), hysteretic energy {b.hysteretic_energy_J:.4g} J")
     if s.contacts:
-        lines.append(f"  pounding: {s.impacts} impacts, peak force {s.peak_force_N:.4g} N, "
+        grazes = f" (and {s.grazes} graze{'s' if s.grazes != 1 else ''}: contacts shallower than graze_depth)" \
+            if s.grazes else ""
+        lines.append(f"  pounding: {s.impacts} impacts{grazes}, peak force {s.peak_force_N:.4g} N, "
                      f"dissipated {s.dissipated_energy_J:.4g} J")
     else:
         lines.append("  no contact element")
@@ -55,26 +67,83 @@ def write_history(result: SimulationResult, path: Path) -> None:
     np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
 
 
-def write_into(folder: Path, result: SimulationResult, plots: bool = True, summary: Summary | None = None) -> None:
-    """Write ``history.csv``, ``summary.json`` and the plots into the (claimed, empty) ``folder``
-    (not after a Ctrl-C that arrived during the last FMI call: :func:`~cosim.master.fmi.deferred_interrupts`)."""
+def history_units(result: SimulationResult) -> list[tuple[str, str, str, str]]:
+    """``(column, unit, description, type)`` of every history column, from the FMUs' model
+    descriptions (``time`` in s first; a unitless ratio has unit ``1``, a count or flag none)."""
+    scene = result.scene
+    interfaces = scene.interfaces or {}
+    fmu_of = {spec.name: spec.fmu for spec in scene.instances()}
+    out = [("time", "s", "time of the communication point", "Real")]
+    for name in result.columns:
+        instance, variable = name.split(".", 1)
+        interface = interfaces.get(fmu_of.get(instance))
+        info = interface.variables.get(variable) if interface is not None else None
+        out.append((name, (info.unit or "") if info else "", (info.description or "") if info else "",
+                    info.type if info else "Real"))
+    return out
+
+
+def write_history_units(result: SimulationResult, path: Path) -> None:
+    """``history_units.csv``: one row per column of ``history.csv``: ``column,unit,description``."""
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(["column", "unit", "description"])
+        writer.writerows(row[:3] for row in history_units(result))
+
+
+def write_history_parquet(result: SimulationResult, path: Path) -> None:
+    """``history.parquet``: the history's columns (Real as float64, Integer and Boolean as int32)
+    with each column's unit and description in its field metadata, the scene in the table's."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    arrays = [result.time] + [result.values[:, j] for j in range(len(result.columns))]
+    fields, columns = [], []
+    for (name, unit, description, kind), values in zip(history_units(result), arrays):
+        array = pa.array(values.astype(np.float64) if kind == "Real" else values.astype(np.int32))
+        fields.append(pa.field(name, array.type, metadata={"unit": unit, "description": description}))
+        columns.append(array)
+    table = pa.Table.from_arrays(columns, schema=pa.schema(fields, metadata={"scene": result.scene.name}))
+    pq.write_table(table, path)
+
+
+def write_impacts(result: SimulationResult, path: Path) -> None:
+    """``impacts.csv``: :func:`~cosim.master.results.impact_table`, units in the column names."""
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow([name for name, _ in IMPACT_COLUMNS])
+        for row in impact_table(result):
+            writer.writerow([row[name] if isinstance(row[name], str) else f"{row[name]:.10g}"
+                             for name, _ in IMPACT_COLUMNS])
+
+
+def write_into(folder: Path, result: SimulationResult, plots: bool = True, summary: Summary | None = None,
+               parquet: bool = False) -> None:
+    """Write ``history.csv`` (with ``history_units.csv``), ``impacts.csv``, ``summary.json`` and the
+    plots (``parquet``: also ``history.parquet``) into the (claimed, empty) ``folder`` (not after a
+    Ctrl-C that arrived during the last FMI call: :func:`~cosim.master.fmi.deferred_interrupts`)."""
     raise_pending_interrupt()
     summary = summary or summarize(result)
     write_history(result, folder / "history.csv")
+    write_history_units(result, folder / "history_units.csv")
+    if parquet:
+        write_history_parquet(result, folder / "history.parquet")
+    if result.scene.contacts:
+        write_impacts(result, folder / "impacts.csv")
     (folder / "summary.json").write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
     if plots:
         plot_all(result, folder)
 
 
 def write_results(result: SimulationResult, folder: str | Path, plots: bool = True,
-                  summary: Summary | None = None, *, overwrite: bool = False) -> Path:
-    """Write ``history.csv``, ``summary.json`` and the plots into ``folder`` by the output rule
+                  summary: Summary | None = None, *, overwrite: bool = False, parquet: bool = False) -> Path:
+    """Write the results (:func:`write_into`) into ``folder`` by the output rule
     (:func:`cosim.files.output_target`: an earlier run's folder is replaced only with
     ``overwrite``); complete or not at all.  Returns the folder."""
     target = output_target(folder, overwrite=overwrite)
     expected = history_bytes(len(result.time), len(result.columns)) + (PLOT_BYTES if plots else 0)
     with written_folder(target, "run", overwrite=overwrite, expected_bytes=expected) as pending:
-        write_into(pending.path, result, plots, summary)
+        write_into(pending.path, result, plots, summary, parquet=parquet)
     return pending.target
 
 
@@ -135,40 +204,61 @@ def plot_displacements(result: SimulationResult, path: Path, plt) -> Path:
 
 
 def plot_contact_force(result: SimulationResult, path: Path, plt) -> Path:
+    """Each contact's mean force over the steps and its running peak; every impact (not the
+    grazes) marked at its own peak force, above the curve, so that no mark reads as a force of 0
+    or below."""
     fig, ax = plt.subplots(figsize=(10, 4))
+    rows = [r for r in impact_table(result) if r["kind"] == "impact"]
     for c in result.scene.contacts:
         line, = ax.plot(result.time, result[f"{c.name}.F"] / 1e3, lw=0.9, label=f"{c.name} mean F over step")
         if result.has(f"{c.name}.F_max"):  # the FMU's running maximum of the instantaneous force
             ax.plot(result.time, result[f"{c.name}.F_max"] / 1e3, "--", lw=0.8, color=line.get_color(),
                     label=f"{c.name} peak force so far")
-        times = impact_times(result, c.name)
-        if times.size:
-            ax.plot(times, np.zeros_like(times), "|", color=line.get_color(), ms=10)
+        mine = [r for r in rows if r["contact"] == c.name]
+        if mine:
+            ax.plot([r["t_onset_s"] for r in mine], [r["peak_force_N"] / 1e3 for r in mine], "v",
+                    color=line.get_color(), ms=6, label=f"{c.name} impact (onset, its peak force)")
+    ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("contact force [kN]")
     _finish(fig, ax, path, plt, f"{result.scene.name}: contact force", loc="upper right")
     return path
 
 
-def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
-    """Contact force against penetration at the communication points.
+#: impacts drawn in hysteresis.png: the largest by peak force (more overlap into one blot)
+LOOPS_PLOTTED = 6
 
-    The mean force of a step is plotted against the penetration at its end:
-    with impacts shorter than the step the loop is sampled coarsely (run
-    with a small ``step`` to resolve it, as ``single_impact`` does).
-    """
+
+def plot_hysteresis(result: SimulationResult, path: Path, plt) -> Path:
+    """Force-penetration loops of the largest impacts, each from its own trajectory inside the
+    steps (:func:`cosim.master.impacts.replay_contact`: the contact FMU's arithmetic replayed on
+    the steps it took, which the run logs whatever it records).  A result without that log (not
+    made by :func:`cosim.master.simulate.simulate`) draws the recorded step means against the
+    end-of-step penetration, labelled as such."""
+    from .impacts import replay_contact
+
     fig, ax = plt.subplots(figsize=(6, 5))
+    loops, fallback = [], []
     for c in result.scene.contacts:
-        if not result.has(f"{c.name}.delta"):
-            continue
-        delta = result[f"{c.name}.delta"]
-        force = result[f"{c.name}.F"]
+        trajectories = replay_contact(result, c.name)
+        if trajectories is None:
+            if result.has(f"{c.name}.delta") and result.has(f"{c.name}.F"):
+                fallback.append(c.name)
+        else:
+            loops += trajectories
+    for t in sorted(loops, key=lambda t: t.peak_force, reverse=True)[:LOOPS_PLOTTED]:
+        ax.plot(t.penetration * 1e3, t.force / 1e3, lw=1.0, label=f"{t.contact} at {t.t_onset:.3f} s")
+    for name in fallback:
+        delta, force = result[f"{name}.delta"], result[f"{name}.F"]
         on = (delta > 0) | (force > 0)  # NaN elsewhere: one polyline per contact episode
-        d = np.where(on, delta, np.nan)
-        ax.plot(d * 1e3, np.where(on, force, np.nan) / 1e3, ".-", lw=0.8, ms=3, label=c.name)
+        ax.plot(np.where(on, delta, np.nan) * 1e3, np.where(on, force, np.nan) / 1e3, ".-", lw=0.8, ms=3,
+                label=f"{name} (step means, end-of-step penetration)")
     ax.set_xlabel("penetration delta [mm]")
-    ax.set_ylabel("contact force (mean over step) [kN]")
-    _finish(fig, ax, path, plt, f"{result.scene.name}: force-penetration loops")
+    ax.set_ylabel("contact force [kN]")
+    shown = min(len(loops), LOOPS_PLOTTED)
+    title = f"{result.scene.name}: force-penetration loops" + (
+        f" ({shown} largest of {len(loops)} contacts)" if loops else "")
+    _finish(fig, ax, path, plt, title)
     return path
 
 

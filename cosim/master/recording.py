@@ -14,7 +14,10 @@ and keeps:
   every building and the largest mean force ``F`` and penetration ``delta`` of every contact,
   with the time of the step end where each was reached, whatever the output interval;
 * **impact onsets**: every step in which a contact's ``impacts`` grew, as (start, end) times
-  (the counter is read after a step in which the contact had a force or a closed gap);
+  (the counter is read after a step in which the contact had a force or a closed gap), and the
+  contact FMU's ``t_onset`` of its first impact;
+* **every contact that ended** (``contacts_ended`` grew): the contact FMU's details of it, read
+  with that step (``impacts.csv``: :func:`cosim.master.results.impact_table`);
 * **the final value** of every output (read once at the end), including the buildings' in-step
   peaks (``x_peak``, ``drift_peak``).
 """
@@ -90,6 +93,16 @@ def tracked_columns(system: "System") -> list[str]:
     return out
 
 
+#: a contact FMU's outputs that describe its latest contact (``impacts.csv``), read after every step
+IMPACT_DETAILS = ("t_onset", "v_impact", "F_peak", "delta_max", "contact_time", "E_last", "CR_achieved")
+
+
+def impact_detail_columns(system: "System") -> list[str]:
+    """What every step must read to describe each contact that ends in it (:class:`Recorder`)."""
+    have = set(system.columns)
+    return [x for c in system.contacts for x in (column(c.name, v) for v in IMPACT_DETAILS) if x in have]
+
+
 class Recorder:
     """Rows at the output interval, peaks and impact onsets from every step (module docstring)."""
 
@@ -138,12 +151,22 @@ class Recorder:
         self.sgn_time = np.zeros(self._sgn.size)
         # impact onsets of every step
         self._contacts = []
+        self._ended = {}
         for node in system.contacts:
             names = node.integers.names
             if "impacts" in names:
                 self._contacts.append((node, names.index("impacts"), index[column(node.name, "F")],
                                        index[column(node.name, "delta")]))
+            details = [column(node.name, v) for v in IMPACT_DETAILS]
+            if "contacts_ended" in names and "grazes" in names and all(c in index for c in details):
+                self._ended[node.name] = (names.index("contacts_ended"), names.index("grazes"),
+                                          [index[c] for c in details])
         self.impacts = {node.name: 0 for node, *_ in self._contacts}
+        self._counts = {name: (0, 0) for name in self._ended}
+        #: contact -> rows of impacts.csv for every contact that ended (None: not tracked)
+        self.impact_rows: list[dict] | None = [] if self._ended else None
+        #: contact -> the FMU's t_onset of its first impact (s)
+        self.first_onsets: dict[str, float] = {}
         self._active = {node.name: False for node, *_ in self._contacts}
         self.onsets: dict[str, list[tuple[float, float]]] = {node.name: [] for node, *_ in self._contacts}
 
@@ -158,6 +181,9 @@ class Recorder:
         for node, i_impacts, i_F, i_delta in self._contacts:
             self.impacts[node.name] = int(node.integers.values[i_impacts])
             self._active[node.name] = y.item(i_F) != 0.0 or y.item(i_delta) >= 0.0
+            if node.name in self._ended:
+                j_ended, j_grazes, _ = self._ended[node.name]
+                self._counts[node.name] = (int(node.integers.values[j_ended]), int(node.integers.values[j_grazes]))
         self.record(t0)
 
     # -- rows ------------------------------------------------------------------------------------
@@ -210,11 +236,36 @@ class Recorder:
         for node, i_impacts, i_F, i_delta in self._contacts:
             active = item(i_F) != 0.0 or item(i_delta) >= 0.0
             if active or self._active[node.name]:
-                count = int(node.integers.get()[i_impacts])
+                ints = node.integers.get()
+                count = int(ints[i_impacts])
                 if count > self.impacts[node.name]:
                     self.onsets[node.name].append((t_start, t_end))
+                    if node.name not in self.first_onsets:
+                        self.first_onsets[node.name] = (y.item(self._ended[node.name][2][0])
+                                                        if node.name in self._ended else t_start)
                     self.impacts[node.name] = count
+                if node.name in self._ended:
+                    self._contact_ended(node.name, ints, t_end)
             self._active[node.name] = active
+
+    def _contact_ended(self, name: str, ints, t_end: float) -> None:
+        """Rows of impacts.csv for the contacts of ``name`` that ended in the step ending at
+        ``t_end`` (as :func:`cosim.master.results.impact_table` reads them from a full history)."""
+        j_ended, j_grazes, where = self._ended[name]
+        ended, grazes = int(ints[j_ended]), int(ints[j_grazes])
+        count, grazed = ended - self._counts[name][0], grazes - self._counts[name][1]
+        self._counts[name] = (ended, grazes)
+        if count <= 0:
+            return
+        nan = float("nan")
+        for _ in range(count - 1):   # ended inside the same step as the detailed one
+            self.impact_rows.append(dict(contact=name, kind="impact (not detailed)", t_onset_s=t_end,
+                                         approach_speed_m_s=nan, peak_force_N=nan, max_penetration_m=nan,
+                                         duration_s=nan, dissipated_energy_J=nan, CR_achieved=nan))
+        t_onset, v, F, d, duration, E, CR = (self.system.y.item(i) for i in where)
+        self.impact_rows.append(dict(contact=name, kind="graze" if grazed and count == 1 else "impact",
+                                     t_onset_s=t_onset, approach_speed_m_s=v, peak_force_N=F, max_penetration_m=d,
+                                     duration_s=duration, dissipated_energy_J=E, CR_achieved=CR))
 
     def peaks(self) -> dict[str, tuple[float, float]]:
         """``column -> (peak, time of the step end where it was reached)``: absolute values for

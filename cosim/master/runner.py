@@ -24,7 +24,8 @@ from ..fmus import default_fmu_dir
 from .limits import DEFAULT_MAX_STEPS, check_run_size
 from .loader import load_scene
 from .output import write_into
-from .results import RunResult, summarize
+from .provenance import provenance
+from .results import ENERGY_CREATION_LIMIT, ENERGY_RESIDUAL_LIMIT, RunResult, summarize
 from .scene import Override
 from .simulate import simulate
 from .system import Catalog, System
@@ -53,7 +54,8 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
               step: float | None = None, stop_time: float | None = None, fmu_dir: str | Path | None = None,
               catalog: Catalog | None = None, write: bool = True, plots: bool = True,
               progress: bool | None = None, output_interval: float | None = None,
-              record: str | Sequence[str] = "summary", max_steps: int = DEFAULT_MAX_STEPS,
+              record: str | Sequence[str] = "summary", max_steps: int = DEFAULT_MAX_STEPS, parquet: bool = False,
+              energy_limit: float = ENERGY_RESIDUAL_LIMIT, creation_limit: float = ENERGY_CREATION_LIMIT,
               **strategy_options: Any) -> RunResult:
     """Load, validate and run a scene; write its results unless ``write=False``.
 
@@ -69,7 +71,9 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
     :class:`cosim.files.OutputError` (the folder is refused or not writable, too little space);
     while running: :class:`~cosim.master.fmi.FMUError` (an FMU refused a parameter or a step),
     :class:`~cosim.master.guard.InstabilityError` (the stability guard stopped the run);
-    nothing is written then.  ``catalog`` reuses already loaded FMUs.
+    nothing is written then.  ``catalog`` reuses already loaded FMUs; ``parquet`` also writes
+    ``history.parquet``; ``energy_limit``, ``creation_limit``: when the summary warns of lost
+    accuracy (:func:`~cosim.master.results.accuracy_warnings`).
     """
     own_catalog = catalog is None
     if own_catalog:
@@ -88,9 +92,10 @@ def run_scene(scene: str | Path | Mapping[str, Any] = DEFAULT_SCENE, overrides: 
             with System(loaded, catalog) as system:
                 result = simulate(system, progress=progress, record=record, max_steps=max_steps,
                                   **strategy_options)
-            summary = summarize(result)
+            made_with = provenance(loaded, catalog)
+            summary = summarize(result, made_with, energy_limit=energy_limit, creation_limit=creation_limit)
             if pending is not None:
-                write_into(pending.path, result, plots, summary)
+                write_into(pending.path, result, plots, summary, parquet=parquet)
     finally:
         if own_catalog:
             catalog.close()

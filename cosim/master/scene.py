@@ -33,7 +33,9 @@ each a one-line :class:`SceneError` naming the file, the line, the table and the
   the step; 0: every communication point) spaces the history's rows
   (:mod:`cosim.master.recording`).
 * ``[ground]`` keys are ``ground_motion.fmu`` parameters.  Without the table
-  no ground-motion FMU is instantiated (free vibration).
+  no ground-motion FMU is instantiated (free vibration).  ``target_sa`` may be
+  written ``{period = 0.5, value = 4.9}`` (s, m/s^2; optional ``damping``,
+  default 0.05); at most one of ``target_pga``, ``target_pga_g``, ``target_sa``.
 * ``[buildings.<name>]`` keys are ``building.fmu`` parameters.  An array
   parameter (``m``, ``k``, ``x0``, ``v0``) is a list of one value per floor
   (1 = lowest) or a scalar applied to every floor; ``"m[3]" = ...`` sets one
@@ -72,7 +74,7 @@ from pathlib import Path
 from typing import Any
 
 from .interface import FmuInterface, declared_interface, parameter_defaults
-from .names import base_name, element_name
+from .names import base_name, element, element_name
 
 #: the bundled scenes (package data)
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
@@ -169,6 +171,19 @@ class InstanceSpec:
             raise KeyError(declared_interface(self.fmu).unknown_variable_message(name, "parameter")) from None
 
 
+#: contact parameters the coupling strategy sets when the scene does not (System.initialize)
+COUPLING_DECLARED = ("host",)
+
+
+def _effective(spec: InstanceSpec, n_storeys: int | None = None) -> dict[str, Any]:
+    """Every parameter of ``spec`` as its FMU gets it; array elements only up to ``n_storeys``."""
+    values = dict(parameter_defaults(spec.fmu))
+    values.update(spec.parameters)
+    if n_storeys is not None:
+        values = {k: v for k, v in values.items() if (element(k)[1] or 0) <= n_storeys}
+    return values
+
+
 @dataclass(frozen=True)
 class ContactLevel:
     """Where a contact instance acts: ``left`` floor ``floor_left`` against
@@ -215,6 +230,8 @@ class Scene:
     interfaces: dict[str, FmuInterface] | None = field(default=None, repr=False, compare=False)
     #: s, at most one history row per interval (None: the step; 0: every communication point)
     output_interval: float | None = None
+    #: the overrides applied after the file was read (their text, in order)
+    overrides: tuple[str, ...] = ()
     #: where each top-level setting came from (``stop_time`` -> ``"--set stop_time=1e9"`` or
     #: ``"scenes/default.toml, line 3"``), for messages about the run's size
     origins: dict[str, str] = field(default_factory=dict, repr=False, compare=False)
@@ -239,6 +256,41 @@ class Scene:
 
     def n_storeys(self, building: str) -> int:
         return int(self.instance(building).parameters["n_storeys"])
+
+    def as_run(self) -> dict[str, Any]:
+        """The scene as it runs, in the scene-file format (a dict TOML or JSON can hold): every
+        parameter of every instance with the value the FMU gets (the scene's, else the FMU's
+        default; a building's floors up to ``n_storeys``), after every override.  Loading it
+        (:func:`cosim.master.loader.load_scene`) gives this scene again: ``summary.json`` keeps
+        it as ``scene_as_run`` so that a run can be repeated from its results."""
+        out: dict[str, Any] = dict(name=self.name, description=self.description, stop_time=self.stop_time,
+                                   step=self.step, coupling=self.coupling)
+        if self.output_interval is not None:
+            out["output_interval"] = self.output_interval
+        if self.ground is not None:
+            out["ground"] = _effective(self.ground)
+        out["buildings"] = {b.name: _effective(b, int(b.parameters["n_storeys"])) for b in self.buildings}
+        if self.contacts:
+            # a contact parameter the scene left unset that the coupling declares at initialization
+            # (System.initialize: host) stays unset, so that the coupling declares it again
+            values = [{k: v for k, v in _effective(c).items() if k not in COUPLING_DECLARED or k in c.parameters}
+                      for c in self.contacts]
+            shared = {k: v for k, v in values[0].items() if all(k in x and x[k] == v for x in values[1:])}
+            pounding: dict[str, Any] = {}
+            pairs: dict[tuple[str, str], list[list[int]]] = {}
+            for level in self.levels:
+                pairs.setdefault((level.left, level.right), []).append([level.floor_left, level.floor_right])
+            lists = list(pairs.values())
+            if all(x == lists[0] for x in lists[1:]):   # given once for every pair of buildings
+                pounding["floors"] = lists[0]
+            pounding["allow_initial_overlap"] = self.allow_initial_overlap
+            pounding.update(shared)
+            for spec, own in zip(self.contacts, values):
+                differs = {k: v for k, v in own.items() if k not in shared}
+                if differs:
+                    pounding[spec.name] = differs
+            out["pounding"] = pounding
+        return out
 
     def connections(self) -> list[Connection]:
         """The signal graph (the same for every coupling strategy)."""

@@ -4,8 +4,10 @@
 coupling strategy (:mod:`cosim.master.coupling`) from t = 0 to the stop time, checks every
 accepted step with the stability guard (:mod:`cosim.master.guard`), keeps what
 :mod:`cosim.master.recording` says (rows at the output interval, peaks and impact onsets of
-every step, the final values) and returns a :class:`~cosim.master.results.SimulationResult`
-(history, peaks, final values and cost).
+every step, the final values), logs what the replays of the true peaks need
+(:mod:`cosim.master.steplog`: every step each contact FMU took, the buildings around contacts)
+and returns a :class:`~cosim.master.results.SimulationResult` (history, peaks, final values,
+logs and cost).
 """
 from __future__ import annotations
 
@@ -19,8 +21,9 @@ from threadpoolctl import threadpool_limits
 from .coupling import get_strategy
 from .fmi import FMUError
 from .guard import StabilityGuard
-from .recording import Recorder, recorded_columns, tracked_columns
+from .recording import Recorder, impact_detail_columns, recorded_columns, tracked_columns
 from .results import Cost, SimulationResult
+from .steplog import ContactWindowLog, LoggedContact, window_columns
 
 if TYPE_CHECKING:
     from .system import System
@@ -106,7 +109,8 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
     if check_stability:
         guard = StabilityGuard(system, max_steps=max_steps, base_step=step)
     recorder = Recorder(system, stop_time, output_interval, recorded_columns(system, record))
-    watched = set(solver.watched_columns()) | set(tracked_columns(system))
+    watched = set(solver.watched_columns()) | set(tracked_columns(system)) | set(impact_detail_columns(system)) | \
+        set(window_columns(system))
     if guard is not None:
         watched |= set(guard.watched_columns())
     system.watch(watched, set(recorder.columns))
@@ -117,6 +121,7 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
 
     solver.on_step = before_step
     recorder.start(0.0)
+    windows = ContactWindowLog(system)    # the steps that hold a contact force (true peaks)
     initial = dict(zip(system.columns, np.concatenate((system.y, system.ints)).tolist()))
     bar = None
     if progress is not False:
@@ -132,6 +137,7 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
             plan.rows = True                   # a strategy that does not say where it steps reads all
             solver.step()
             recorder.track(t_start, solver.t)  # first: it reads the counters the guard checks
+            windows.track(t_start, solver.t)
             if guard is not None:
                 guard.check(solver.t, getattr(solver, "h_last", solver.h))
             if plan.rows and recorder.due(solver.t):
@@ -162,4 +168,6 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
         scene=scene, strategy=cls.name, time=times, columns=list(recorder.columns), values=values, cost=cost,
         instances=[n.name for n in system.nodes], stats=stats, final=final, peaks=recorder.peaks(),
         onsets={name: list(v) for name, v in recorder.onsets.items()}, output_interval=output_interval,
-        initial=initial)
+        impact_rows=recorder.impact_rows, first_onsets=dict(recorder.first_onsets),
+        initial=initial, contact_windows=windows.windows(),
+        contact_steps={n.name: n.instance.steps() for n in system.contacts if isinstance(n.instance, LoggedContact)})

@@ -29,6 +29,7 @@ import numpy as np
 from ..fmus import BUILDING, FMU_NAMES, fmu_spec
 from .fmi import FMU, InstanceProtocol, PortProtocol
 from .names import column
+from .steplog import LoggedContact
 
 if TYPE_CHECKING:
     from .scene import InstanceSpec, Scene
@@ -276,6 +277,8 @@ class System:
                 inst.variable(name, "input")
             inputs = inst.real_port(in_names[s.name])
             kind = fmu_spec(s.fmu).role
+            if kind == "contact":   # every doStep it takes is logged for the replays (steplog.py)
+                inst = LoggedContact(inst, inputs)
             self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind,
                                    y=self.y, plan=self.plan))
             self._in_names[s.name] = in_names[s.name]

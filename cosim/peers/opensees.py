@@ -287,7 +287,7 @@ def model_description(buildings: Sequence, ground, contacts: Sequence, stop_time
         spec_contacts.append(dict(left=int(contact.left), left_floor=int(contact.left_floor),
                                   right=int(contact.right), right_floor=int(contact.right_floor),
                                   k=float(law.k), n=float(law.n), zeta=float(law.zeta), m=float(law.m),
-                                  gap=float(contact.gap)))
+                                  gap=float(contact.gap), graze_depth=float(getattr(contact, "graze_depth", 0.0))))
     return dict(buildings=spec_buildings, ground=spec_ground, contacts=spec_contacts, stop_time=stop_time,
                 dt=dt, material=material, tol=float(tol), max_iter=int(max_iter),
                 max_subdivisions=int(max_subdivisions), record_storeys=bool(record_storeys),
@@ -343,13 +343,22 @@ def contact_work(force: np.ndarray, penetration: np.ndarray) -> float:
     return float(np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(penetration)))
 
 
+def count_impacts(force: np.ndarray, penetration: np.ndarray, graze_depth: float = 0.0) -> int:
+    """Impacts in one contact element's history: runs of compressive ``force`` (N) whose largest
+    ``penetration`` (m) reaches ``graze_depth`` (m), as pounding.fmu and the reference count them
+    (a shallower contact is a graze)."""
+    on = np.asarray(force) > 0.0
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], on.astype(np.int8), [0]))))
+    return sum(1 for a, b in zip(edges[::2], edges[1::2]) if float(np.max(penetration[a:b])) >= graze_depth)
+
+
 def _summarise(spec: dict, arrays: dict, summary: dict, offsets) -> PeerResult:
     t, u, F, delta = arrays["t"], arrays["u"], arrays["force"], arrays["delta"]
     impacts = 0
     dissipated = 0.0
     for c, contact in enumerate(spec["contacts"]):
         on = F[:, c] > 0.0
-        impacts += int(np.count_nonzero(on[1:] & ~on[:-1]) + (1 if on.size and on[0] else 0))
+        impacts += count_impacts(F[:, c], delta[:, c], float(contact.get("graze_depth", 0.0)))
         d_end = max(float(delta[-1, c]), 0.0) if delta.size else 0.0
         stored = contact["k"] * d_end ** (contact["n"] + 1.0) / (contact["n"] + 1.0) if on.size and on[-1] else 0.0
         dissipated += contact_work(F[:, c], delta[:, c]) - stored

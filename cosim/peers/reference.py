@@ -81,21 +81,19 @@ as in :class:`~fmu_src.shear_building.ShearBuilding` and the FMU variables ``F[i
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
-from fmu_src.contact_laws import law_for
-from fmu_src.ground_records import load_record
-
 from fmu_src.hysteresis import StoreyHysteresis
 
-from ..master.models import initial_state, shear_building
+from ..master.models import contact_law, ground_record, initial_state, shear_building
 from ..master.names import element_name
 from .storeys import EVENT_KINDS as STOREY_EVENTS, Storeys
 
@@ -118,6 +116,9 @@ class Contact:
         Force law (``fmu_src.contact_laws.law_for(...)``): ``force(delta, delta_dot, v_imp)``.
     gap : float
         Initial clear distance (m), >= 0: ``delta = x_left - x_right - gap``.
+    graze_depth : float
+        A contact whose largest penetration stays below this (m) is a graze, not an impact
+        (``pounding.fmu``'s parameter of that name); 0: every contact is an impact.
     """
 
     left: int
@@ -126,6 +127,7 @@ class Contact:
     right_floor: int
     law: object
     gap: float = 0.0
+    graze_depth: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -148,6 +150,8 @@ class Impact:
     dissipated_energy_J : float
         Work done on the contact over the impact (J); for an impact still open at the end,
         that work minus the elastic energy ``k delta^(n+1) / (n+1)`` still stored.
+    grazing : bool
+        Its largest penetration stayed below the contact's ``graze_depth``: a graze, not an impact.
     """
 
     contact: int
@@ -157,6 +161,7 @@ class Impact:
     max_penetration: float = 0.0
     t_separation: float = math.nan
     dissipated_energy_J: float = 0.0
+    grazing: bool = False
 
     @property
     def duration(self) -> float:
@@ -213,6 +218,7 @@ class ReferenceResult:
     peak_force_N: float
     dissipated_energy_J: float
     peak_displacements: tuple[np.ndarray, ...]   # per building, per floor: max |u| (m)
+    peak_accelerations: tuple[np.ndarray, ...]   # per building, per floor: max |absolute acceleration| (m/s^2)
     t_steps: np.ndarray
     floor_offsets: tuple[int, ...]
     method: str
@@ -232,10 +238,17 @@ class ReferenceResult:
     hysteretic_energy_J: tuple[float, ...] = ()
     yielding_buildings: tuple[int, ...] = ()      # indices of the buildings with yielding storeys
 
+    graze_list: tuple[Impact, ...] = ()                # contacts shallower than their graze_depth
+
     @property
     def impacts(self) -> int:
-        """Number of impacts (onsets) over all contacts."""
+        """Number of impacts over all contacts (grazes not counted: ``graze_list``)."""
         return len(self.impact_list)
+
+    @property
+    def grazes(self) -> int:
+        """Number of grazes: contacts whose penetration stayed below their contact's graze_depth."""
+        return len(self.graze_list)
 
     @property
     def energy_residual(self) -> float:
@@ -687,6 +700,7 @@ class _Integration:
         self.peaks = _PeakTracker(np.abs(y0[:system.n]))
         D = system.storeys.D
         self.drift_peaks = _PeakTracker(np.abs(D @ y0[:system.n]), D)
+        self.acceleration_peaks = _AccelerationTracker(system, y0)
 
     def march(self, breaks: np.ndarray, stop_time: float) -> None:
         """Integrate from 0 to ``stop_time``: one segment to the next event or breakpoint at a time."""
@@ -737,6 +751,10 @@ class _Integration:
         self.step_t.append(sol.t[1:])
         self.peaks.update(sol)
         self.drift_peaks.update(sol)
+        # the segment's right-hand side with its phases, impact speeds and storey state frozen: the
+        # tracker may evaluate it after later events have changed them (self.phases is mutated)
+        self.acceleration_peaks.update(sol, fun, any(p != OPEN for p in phases), lambda: system.rhs(
+            list(phases), v_imp.copy(), copy.deepcopy(storey_state)))
 
         # output grid points inside (t, t_new]
         stop = np.searchsorted(self.t_output, t_new, side="right")
@@ -800,6 +818,8 @@ class _Integration:
             work = float(self.y_end[2 * n + 2 + c]) - rec.pop("work0")
             impacts.append(_close_impact(rec, math.nan, work - stored_end[c]))
         impacts.sort(key=lambda imp: imp.t_onset)
+        impacts = [replace(imp, grazing=imp.max_penetration < system.contacts[imp.contact].graze_depth)
+                   for imp in impacts]
 
         # histories on the output grid (phases re-derived from the impact list)
         u_out, v_out = y_out[:, :n], y_out[:, n:2 * n]
@@ -833,12 +853,16 @@ class _Integration:
             e_h[b] = float(y_end[storeys.i_h + row])
         nb = len(system.buildings)
         peak_u = self.peaks.refined()
+        peak_a = self.acceleration_peaks.refined()
+        per_building = list(zip(system.offsets[:-1], system.offsets[1:]))
         return ReferenceResult(
             t=t_output, u=u_out, v=v_out, contact_force=forces, penetration=deltas, energies=energies,
-            impact_list=tuple(impacts),
+            impact_list=tuple(imp for imp in impacts if not imp.grazing),
+            graze_list=tuple(imp for imp in impacts if imp.grazing),
             peak_force_N=max((imp.peak_force_N for imp in impacts), default=0.0),
             dissipated_energy_J=float(sum(imp.dissipated_energy_J for imp in impacts)),
-            peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in zip(system.offsets[:-1], system.offsets[1:])),
+            peak_displacements=tuple(peak_u[o0:o1] for o0, o1 in per_building),
+            peak_accelerations=tuple(peak_a[o0:o1] for o0, o1 in per_building),
             t_steps=np.concatenate(self.step_t), floor_offsets=system.offsets, method=self.method, rtol=self.rtol,
             nfev=self.nfev, njev=self.njev, nlu=self.nlu, n_segments=self.segments,
             wall_time_s=time.perf_counter() - t_start, event_counts=self.event_counts,
@@ -964,6 +988,63 @@ class _PeakTracker:
         return out
 
 
+class _AccelerationTracker:
+    """Largest absolute floor acceleration ``|u'' + ag|`` of every floor over the run, from the
+    dense output and the segment's own right-hand side (contact forces of its phases, yielding
+    storeys, stick: the impact spikes included).
+
+    As :class:`_PeakTracker`: 8 samples per solver step, the best segment kept with its
+    right-hand side, each maximum polished by a bounded scalar search.  A segment without a
+    closed contact or yielding storeys is evaluated for all samples at once (linear in the state).
+    """
+
+    def __init__(self, system: "_System", y0: np.ndarray):
+        self.system = system
+        n = system.n
+        self.value = np.abs(system.minv * (-(system.K @ y0[:n]) - system.C @ y0[n:2 * n]))
+        self.where: list = [None] * n
+
+    def _values(self, fun, ts: np.ndarray, ys: np.ndarray, linear: bool) -> np.ndarray:
+        """|absolute acceleration| (n, points) at times ``ts`` of states ``ys`` (size, points)."""
+        system, n = self.system, self.system.n
+        if linear:
+            return np.abs(system.minv[:, None] * (-(system.K @ ys[:n]) - system.C @ ys[n:2 * n]))
+        return np.abs(np.column_stack([fun(t, ys[:, k])[n:2 * n] + float(system.ag(t))
+                                       for k, t in enumerate(ts)]))
+
+    def update(self, sol, fun, closed: bool, freeze) -> None:
+        """Sample segment ``sol`` (right-hand side ``fun``); ``freeze()``: ``fun`` with its
+        arguments copied, kept for :meth:`refined` when the segment holds a new maximum."""
+        ts = sol.t
+        if ts.size < 2:
+            return
+        linear = not closed and not self.system.storeys.inelastic
+        frac = np.linspace(0.0, 1.0, 9)[:-1]
+        grid = np.append((ts[:-1, None] + np.diff(ts)[:, None] * frac).ravel(), ts[-1])
+        a = self._values(fun, grid, sol.sol(grid), linear)
+        best = np.argmax(a, axis=1)
+        frozen = None
+        for dof in np.flatnonzero(a[np.arange(a.shape[0]), best] > self.value):
+            k = best[dof]
+            self.value[dof] = a[dof, k]
+            frozen = frozen or (fun if linear else freeze())
+            self.where[dof] = (sol.sol, grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)], frozen, linear)
+
+    def refined(self) -> np.ndarray:
+        out = self.value.copy()
+        for dof, where in enumerate(self.where):
+            if where is None or where[2] <= where[1]:
+                continue
+            interp, lo, hi, fun, linear = where
+
+            def minus(tt, interp=interp, fun=fun, linear=linear, dof=dof):
+                return -float(self._values(fun, np.array([tt]), interp(tt)[:, None], linear)[dof, 0])
+
+            res = minimize_scalar(minus, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12 * max(1.0, hi)})
+            out[dof] = max(out[dof], -float(res.fun))
+        return out
+
+
 def _force_history(system: _System, t_out, y_out, impacts):
     """Contact forces, penetrations and stored energies on the output grid.
 
@@ -1003,9 +1084,8 @@ def scene_inputs(scene) -> dict:
     """Plain arguments of :func:`solve_reference` for a scene, with the FMUs' physics.
 
     Builds the same objects the slaves build in ``initialize()`` from the same parameter
-    values (the scene's, else the FMU's defaults: :meth:`cosim.master.scene.InstanceSpec.value`):
-    ``ShearBuilding`` (``from_period`` when ``T1 > 0``), ``StoreyHysteresis``, ``load_record``
-    and ``law_for``.  Contacts keep the scene's order.
+    values (:mod:`cosim.master.models`; the storey laws as ``StoreyHysteresis``).  Contacts keep
+    the scene's order.
     """
     buildings, x0, v0, hystereses = [], [], [], []
     for spec in scene.buildings:
@@ -1016,23 +1096,14 @@ def scene_inputs(scene) -> dict:
             float(spec.value("alpha")), float(spec.value("bw_n")), float(spec.value("bw_beta")),
             float(spec.value("bw_gamma"))))
         x, v = initial_state(spec)
-        x0.append(np.array(x))
-        v0.append(np.array(v))
-
-    ground = None
-    if scene.ground is not None:
-        g = scene.ground.value
-        ground = load_record(g("record"), fmt=g("format"), dt=float(g("dt")) or None, units=g("units"),
-                             scale=float(g("scale")), target_pga=float(g("target_pga")) or None,
-                             time_shift=float(g("time_shift")))
-
+        x0.append(x)
+        v0.append(v)
+    ground = ground_record(scene.ground) if scene.ground is not None else None
     contacts = []
     index = {spec.name: b for b, spec in enumerate(scene.buildings)}
     for level, spec in zip(scene.levels, scene.contacts):
-        p = spec.value
-        law = law_for(p("model"), float(p("k")), float(p("n")), float(p("m1")), float(p("m2")),
-                      float(p("CR")), float(p("zeta")))
         contacts.append(Contact(index[level.left], int(level.floor_left), index[level.right],
-                                int(level.floor_right), law, float(p("gap"))))
+                                int(level.floor_right), contact_law(spec), float(spec.value("gap")),
+                                float(spec.value("graze_depth"))))
     return dict(buildings=buildings, ground=ground, contacts=contacts, stop_time=float(scene.stop_time),
                 x0=x0, v0=v0, hystereses=hystereses)

@@ -28,7 +28,7 @@ from typing import Any, Iterator, Mapping, Sequence
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from ... import __version__
-from ...fmus import FMU_NAMES, default_fmu_dir
+from ...fmus import default_fmu_dir, fmu_hashes
 from ...master.scene import Override
 from ...master.system import Catalog
 from .cases import Case
@@ -45,10 +45,6 @@ WORKER_WAIT_S = 60.0       # a scheduler without workers: how long to wait for t
 class ClusterLost(RuntimeError):
     """The study had to stop (exit 1): the Dask scheduler went away, or no worker is left that
     can run the cases.  The rows written are kept; ``--resume`` completes the study."""
-
-
-def fmu_hashes(fmu_dir: Path) -> dict[str, str]:
-    return {n: hashlib.sha256((fmu_dir / f"{n}.fmu").read_bytes()).hexdigest() for n in FMU_NAMES}
 
 
 class WorkerUnfit(RuntimeError):

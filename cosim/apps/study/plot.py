@@ -11,6 +11,29 @@ from .results_io import read_results
 from .spec import StudyError
 
 
+#: units of summary columns by the suffix of their names (SI units in the names, cosim.master.results)
+_SUFFIX_UNITS = (("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_N", "N"), ("_J", "J"), ("_m", "m"), ("_s", "s"),
+                 ("_relative", "1"), ("_g", "g"))
+
+
+def axis_label(name: str) -> str:
+    """``name [unit]``: the unit from a summary column's suffix (``peak_force_N``), else that of an
+    FMU variable of that name (a varied parameter, ``pounding.gap``) from the FMUs' declared
+    interfaces; the bare name when neither says (a count)."""
+    from ...fmus import FMU_NAMES
+    from ...master.interface import declared_interface
+
+    last = name.rsplit(".", 1)[-1]
+    for suffix, unit in _SUFFIX_UNITS:
+        if last.endswith(suffix):
+            return f"{name} [{unit}]"
+    for fmu in FMU_NAMES:
+        info = declared_interface(fmu).variables.get(last)
+        if info is not None:
+            return f"{name} [{info.unit}]" if info.unit else name
+    return name
+
+
 def plot_results(csv_path: str | Path, x: str, y: str, by: str | None = None, where: Sequence[str] = (),
                  out: str | Path | None = None, logy: bool = False) -> Path:
     """Plot column ``y`` against varied column ``x`` of the ok rows, one curve per value of ``by``.
@@ -53,8 +76,8 @@ def plot_results(csv_path: str | Path, x: str, y: str, by: str | None = None, wh
                              + ": another column varies too; pick one value with --where COLUMN=VALUE")
         ax.plot(xs, [r[y] for r in group], "o-", ms=3, lw=1.2, label=f"{key}" if by else None)
     skipped = len(rows) - len(ok)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    ax.set_xlabel(axis_label(x))
+    ax.set_ylabel(axis_label(y))
     if logy:
         ax.set_yscale("log")
     ax.set_title(f"{csv_path.parent.name}: {y} against {x}" + (f" ({skipped} failed/unstable rows left out)"
