@@ -128,7 +128,7 @@ class LatePrediction(Adaptive):
         h_target, closures = super()._plan()
         if not closures:          # in contact, or no closure possible: unchanged
             return h_target, closures
-        return min(self.h_max, 4.0 * h_target), [4.0 * s for s in closures]
+        return min(self.h_max, 4.0 * h_target), [(4.0 * s, h_keep) for s, h_keep in closures]
 
 
 def test_rollback_when_the_prediction_fails(catalog):

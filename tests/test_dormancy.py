@@ -87,6 +87,9 @@ def test_long_steps_keep_the_impacts(catalog, name):
         assert long.cost.communication_steps < 0.25 * base.cost.communication_steps
         rel_force, rel_energy = 2e-3, 3e-3
     assert b.impacts == a.impacts
+    # states are saved only before steps that could be rejected (adaptive.SAVE_SPEED_MARGIN):
+    # no closure was found in a step taken without a saved state
+    assert long.stats["missed_events"] == base.stats["missed_events"] == 0
     for c in a.contacts:
         assert b.contacts[c].impacts == a.contacts[c].impacts
         assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=rel_force)
@@ -237,3 +240,40 @@ def test_declared_long_quiet_steps_match_the_resolver():
     never have (2 of 7 here), while steps of 4 base steps (the dormant contact's catch-up) start none."""
     assert spurious_onsets(0.04) == 0
     assert fmu_spec(POUNDING).long_quiet_steps == (spurious_onsets(0.32) == 0)
+
+
+# -- rollback ------------------------------------------------------------------------------------------
+def test_a_rollback_restores_a_contact_that_slept_through_the_save(catalog):
+    """A contact asleep when the adaptive coupling saves the FMU states adds no state of its own
+    to the save: it has not been called since it fell asleep, so its state is the one its sleep
+    holds, and a rollback sets it back to that only if it woke inside the rejected step.  The
+    run is bit for bit the one that saves every FMU's state (a 4 times too late closure
+    prediction forces rollbacks, tests/test_adaptive.py), and the restore from the sleep's
+    state is exercised."""
+    from test_adaptive import PLAIN_ADAPTIVE, LatePrediction
+
+    class Counting(LatePrediction):
+        def _restore(self, saved):
+            sleeping = self._dormancy.sleeping
+            for node, state in zip(self.system.nodes, saved[0]):
+                if state is None and (node.name not in sleeping
+                                      or sleeping[node.name].state is not saved[3][node.name].state):
+                    self.stats["woke_in_rejected_step"] = self.stats.get("woke_in_rejected_step", 0) + 1
+            super()._restore(saved)
+
+    class SaveEverything(LatePrediction):
+        def _save(self):
+            self._dormancy.asleep = lambda node: False      # every FMU's own state, as before
+            try:
+                return super()._save()
+            finally:
+                del self._dormancy.asleep
+
+    overrides = PLAIN_ADAPTIVE + ["stop_time=4.2"]
+    lean = simulate_scene(catalog, "default", overrides, strategy=Counting, risk_factor=1e9)
+    full = simulate_scene(catalog, "default", overrides, strategy=SaveEverything, risk_factor=1e9)
+    assert lean.cost.rollbacks >= 3 and lean.stats.get("woke_in_rejected_step", 0) >= 1
+    assert lean.cost.rollbacks == full.cost.rollbacks and lean.stats["missed_events"] == 0
+    assert lean.columns == full.columns
+    np.testing.assert_array_equal(lean.time, full.time)
+    np.testing.assert_array_equal(lean.values, full.values)

@@ -107,7 +107,7 @@ class _LatePrediction(Adaptive):
         h_target, closures = super()._plan()
         if not closures:
             return h_target, closures
-        return min(self.h_max, 4.0 * h_target), [4.0 * s for s in closures]
+        return min(self.h_max, 4.0 * h_target), [(4.0 * s, h_keep) for s, h_keep in closures]
 
 
 def test_rolled_back_steps_leave_the_log(catalog):
