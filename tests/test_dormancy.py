@@ -217,6 +217,21 @@ def test_free_vibration_wakes_for_its_first_impact(catalog):
     assert asleep.final["pounding_1.F_max"] == pytest.approx(awake.final["pounding_1.F_max"], rel=1e-9)
 
 
+def test_catch_up_pieces_are_bounded_in_seconds_at_a_coarse_base_step(catalog):
+    """free_vibration at a 20 ms base step: catch-up pieces of 4 base steps (0.08 s) started a
+    sixth impact the reference does not have (8.7 % energy); pieces capped at
+    MAX_CATCH_UP_SPAN keep the reference's 5 impacts, as the run without sleeping contacts does."""
+    from cosim.master.coupling.adaptive import MAX_CATCH_UP_SPAN
+    asleep = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True)
+    awake = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=False)
+    too_long = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True, catch_up_span=0.08)
+    assert MAX_CATCH_UP_SPAN < 0.08
+    assert asleep.stats["dormant_steps"] > 0
+    assert asleep.final["pounding_1.impacts"] == awake.final["pounding_1.impacts"] == 5
+    assert too_long.final["pounding_1.impacts"] == 6      # the failure the cap prevents (a test that can fail)
+    assert asleep.final["pounding_1.F_max"] == pytest.approx(awake.final["pounding_1.F_max"], rel=1e-3)
+
+
 # -- why resolved contacts take no long step yet --------------------------------------------------------------
 def spurious_onsets(long_step: float) -> int:
     """Impacts a resolved contact starts in one step of ``long_step`` s after 10 ms steps of a

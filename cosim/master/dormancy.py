@@ -20,7 +20,7 @@ contact ever sees) is given to the contact in equal pieces of at most ``span``, 
 states inside it interpolated between its ends (cubic Hermite: positions from the positions and
 velocities at both ends, velocities its derivative).  A resolved contact extrapolates the
 structures' motion of its last step over the next one (linearly in acceleration): over a 0.32 s
-step that extrapolation crosses gaps the floors never close, over ``span`` (4 base steps) it
+step that extrapolation crosses gaps the floors never close, over ``span`` (4 base steps, at most 0.04 s) it
 does not (tests/test_dormancy.py).  Only the flight out of contact depends on these states, and
 the proof says there is no contact in them.
 
