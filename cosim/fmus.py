@@ -72,9 +72,10 @@ FMUS = (
     # long_quiet_steps=False: a resolved contact (resolve_impacts = true) predicts the bodies'
     # flight over a step from the structures' motion it learnt over its previous step; over a
     # step many times longer that prediction can cross the gap where the bodies never do (a
-    # spurious impact: tests/test_dormancy.py shows one), so the master gives it no long step:
-    # it takes long steps only while such contacts sleep, and their catch-up cuts a long step
-    # into pieces of 4 base steps, at most 0.04 s (cosim/master/dormancy.py; plain contacts take any step)
+    # spurious impact: tests/test_dormancy.py shows one), so the master gives it no undeclared
+    # long step: it takes long steps only while such contacts sleep, and their catch-up declares
+    # the skipped interval open (input gap_open: no prediction over it; cosim/master/dormancy.py;
+    # plain contacts take any step)
     FmuSpec(POUNDING, "pounding_slave", "Pounding", "contact", "contact element: spring + dashpot impact laws",
             long_quiet_steps=False),
     FmuSpec(BUILDING, "building_slave", "Building", "building", "shear building, 1 to 20 storeys, linear or yielding storeys"),

@@ -41,8 +41,11 @@ class PlainContact:
         self.last_E = 0.0           # J, dissipated by the latest completed contact
         self._E_at_onset = 0.0
 
-    def step(self, delta: float, delta_dot: float, h: float) -> float:
-        """Force [N] for the step of length ``h`` [s] starting at the given inputs."""
+    def step(self, delta: float, delta_dot: float, h: float, gap_open: bool = False) -> float:
+        """Force [N] for the step of length ``h`` [s] starting at the given inputs.
+
+        ``gap_open`` (the host declares the gap open over the step) changes nothing here: the law
+        on the inputs has nothing to predict, and with the bodies apart its force is 0 anyway."""
         if self.stepped:
             self.work += self.F * (delta - self.delta_prev)
         self.stepped = True

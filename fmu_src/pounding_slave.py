@@ -10,7 +10,10 @@ not depend on where the communication points fall.  The resolver follows the hos
 structures' own contribution to the relative motion (storey springs, dampers) is measured
 from the inputs of consecutive steps, predicted over the next step and corrected, so that
 contacts lasting several steps stay on the host's trajectory; for free masses it is zero.  With ``false`` the force law is
-evaluated on the current inputs only (:class:`fmu_src.plain_contact.PlainContact`).
+evaluated on the current inputs only (:class:`fmu_src.plain_contact.PlainContact`).  A host
+that has proven the gap open over a step may declare it (input ``gap_open``): the contact then
+skips the step's work (resolver rule 8), so that a master can catch a sleeping contact up over
+any length in a few doSteps (cosim/master/dormancy.py).
 See docs/contact_models.md for the models and the in-step rules.
 """
 from __future__ import annotations
@@ -77,6 +80,12 @@ class Pounding(Fmi2Slave):
                              "fmi2Discard and leaves the instance as before it, so that a host that can roll back "
                              "retries with a smaller step"),
         # inputs
+        Variable("gap_open", type="Boolean", causality="input", start=False,
+                 description="the host declares that it has proven the gap open (x1 - x2 < gap) over the whole "
+                             "coming step: the contact then does no onset search and predicts no flight over it "
+                             "(no force, no impact), whatever its length, unless an impact is in progress; false "
+                             "(default): every step in full. Bodies found overlapping at either end of a declared "
+                             "step are logged as a warning (docs/fmi_hosts.md, 'Declaring a step open')"),
         Variable("x1", causality="input", start=0.0, unit="m", description="displacement of body 1"),
         Variable("v1", causality="input", start=0.0, unit="m/s", description="velocity of body 1"),
         Variable("x2", causality="input", start=0.0, unit="m", description="displacement of body 2"),
@@ -93,7 +102,8 @@ class Pounding(Fmi2Slave):
                  description="largest instantaneous contact force so far"),
         Variable("delta", start=0.0, unit="m", **_OUT,
                  description="penetration x1 - x2 - gap (< 0: open); resolved mode: internal state at the end "
-                             "of the step; plain mode: at the inputs"),
+                             "of the step (after a step declared open: the inputs at its start); plain mode: at "
+                             "the inputs"),
         Variable("delta_dot", start=0.0, unit="m/s", **_OUT,
                  description="penetration rate (> 0 approaching), same time point as delta"),
         Variable("in_contact", type="Boolean", start=False, **_OUT,
@@ -131,12 +141,13 @@ class Pounding(Fmi2Slave):
         Variable("substeps", type="Integer", start=0, **_OUT,
                  description="internal integration steps in the last doStep (cost counter)"),
     )
-    PRIVATE_STATE = ("_contact", "_watch")
+    PRIVATE_STATE = ("_contact", "_watch", "_declared_from")
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._contact = None        # ImpactResolver or PlainContact, built at initialisation
         self._watch = None          # PlausibilityWatch
+        self._declared_from = None  # s, start of the last step if it was declared open (gap_open), else None
 
     def initialize(self) -> None:
         law = law_for(self.model, self.k, self.n, self.m1, self.m2, self.CR, self.zeta)
@@ -149,22 +160,25 @@ class Pounding(Fmi2Slave):
     def step(self, current_time: float, step_size: float) -> None:
         delta = self.x1 - self.x2 - self.gap
         delta_dot = self.v1 - self.v2
+        declared = bool(self.gap_open)
+        self._check_declaration(current_time, delta, declared)
         discard = self.on_implausible == "discard"
-        saved = copy.deepcopy((self._contact, self._watch)) if discard else None
+        saved = copy.deepcopy((self._contact, self._watch, self._declared_from)) if discard else None
+        self._declared_from = current_time if declared else None
         c = self._contact
         started = c.started
         if self.resolve_impacts:
-            out = c.step(delta, delta_dot, step_size)
+            out = c.step(delta, delta_dot, step_size, declared)
             F, impulse, substeps = out.mean_force, out.impulse, out.substeps
             for notice in c.observer.notices:
                 self.log(f"{self.instance_name}: t = {current_time:.9g} s: {notice}", Fmi2Status.warning)
             c.observer.notices.clear()
         else:
-            F = c.step(delta, delta_dot, step_size)
+            F = c.step(delta, delta_dot, step_size, declared)
             impulse, substeps = F * step_size, 1
         for kind, message in self._watch.check(c, step_size):
             if discard:
-                self._contact, self._watch = saved
+                self._contact, self._watch, self._declared_from = saved
                 raise SlaveError(f"step of {step_size:.6g} s refused (on_implausible = 'discard'): {message}")
             self.log(f"{self.instance_name}: t = {current_time:.9g} s: {message}", Fmi2Status.warning)
         self.F, self.impulse, self.substeps = F, impulse, substeps
@@ -188,3 +202,16 @@ class Pounding(Fmi2Slave):
         self.v_impact = c.v_imp
         self.delta_max = c.delta_max
         self.contact_time = c.impact_time
+
+    def _check_declaration(self, t: float, delta: float, declared: bool) -> None:
+        """Warn about a host's ``gap_open`` that its own inputs contradict: bodies overlapping
+        (``delta`` > 0 m) at the end of a step declared open, or at the start of one (taken in full)."""
+        if self._declared_from is not None and delta > 0.0:
+            self.log(f"{self.instance_name}: t = {t:.9g} s: gap_open was true over the step from t = "
+                     f"{self._declared_from:.9g} s, but the bodies overlap by {delta:.6g} m at its end "
+                     f"(x1 - x2 - gap must stay < 0 over a step declared open): the host's proof is wrong, and a "
+                     f"contact inside that step may have been missed", Fmi2Status.warning)
+        if declared and delta > 0.0:
+            self.log(f"{self.instance_name}: t = {t:.9g} s: gap_open = true, but the bodies overlap by "
+                     f"{delta:.6g} m at the step start (x1 - x2 - gap must be < 0 over a step declared open): "
+                     f"the step is taken in full", Fmi2Status.warning)

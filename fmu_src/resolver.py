@@ -122,6 +122,12 @@ class ImpactResolver:
        bodies separate a little slower; energy is taken rather than created.  So is what the
        host's own rates show created for every host timing not yet excluded
        (:meth:`_passivity`): with several contacts on a structure ``int C A dt`` misses most of it.
+    8. *A step declared open* (``gap_open``, :meth:`open_step`): a host that has proven the gap
+       open over the coming step (``x1 - x2 < gap`` throughout) may say so; when the contact has
+       nothing in progress (:meth:`can_skip`) it then does no onset search and no prediction of
+       the flight over the step, whatever its length: no force, no impact.  The structures'
+       motion is learnt from the host's increments as after any step; the next step starts from
+       the host's state.
 
     ``follow_host=False`` restores the free-mass model (``a_ext = 0``, no corrections).
     The instance holds only plain numbers, so ``copy.deepcopy`` saves its state.
@@ -157,6 +163,7 @@ class ImpactResolver:
         self.ahead = 0.0            # N s, impulse handed over ahead of the internal trajectory (rule 7)
         self.rate0 = 0.0            # m/s, the resolver's own rate at the start of the current step
         self.just_separated = False
+        self.after_open = False     # the last step was skipped as declared open (rule 8)
         self.dtau = 1e-3            # next internal step, scaled
         self.a0 = 0.0               # m/s^2, external relative acceleration at the step start
         self.a1 = 0.0               # m/s^3, its rate over the step
@@ -227,12 +234,18 @@ class ImpactResolver:
         self.delta_dot_end += cu
 
     # -- one communication step ------------------------------------------------------------
-    def step(self, delta: float, delta_dot: float, h: float) -> StepOutcome:
-        """Advance over ``h`` [s] from the host's ``delta`` [m], ``delta_dot`` [m/s] at the step start."""
+    def step(self, delta: float, delta_dot: float, h: float, gap_open: bool = False) -> StepOutcome:
+        """Advance over ``h`` [s] from the host's ``delta`` [m], ``delta_dot`` [m/s] at the step start.
+
+        ``gap_open``: the host declares the gap open over the whole step (rule 8); the step is then
+        skipped if the bodies are apart at its start and the contact can skip it (:meth:`can_skip`),
+        else taken as an ordinary one."""
         if not (h > 0.0 and math.isfinite(h)):
             raise ValueError(f"communication step h = {h!r} s is outside the allowed range h > 0")
-        out = StepOutcome()
         delta, delta_dot = float(delta), float(delta_dot)
+        if gap_open and delta <= 0.0 and self.can_skip():
+            return self.open_step(delta, delta_dot, h)
+        out = StepOutcome()
         self._follow(delta, delta_dot, h)
         d0, v0 = (0.0, 0.0) if self.in_contact else self._flight_start(delta, delta_dot)
         self.rate0 = self.u * self.v_imp if self.in_contact else v0   # m/s, own rate at the step start
@@ -250,6 +263,30 @@ class ImpactResolver:
             self.observer.record(out.mean_force, h, internal, (own, self.rate0, self.delta_dot_end))
         self.stepped = True
         return out
+
+    def can_skip(self) -> bool:
+        """True when a step declared open may be skipped (rule 8): out of contact, with every
+        impulse handed over delivered to the host (nothing ahead, none on its way)."""
+        if self.in_contact or self.ahead != 0.0:
+            return False
+        return not self.follow_host or self.observer.quiet_steps >= self.observer.support
+
+    def open_step(self, delta: float, delta_dot: float, h: float) -> StepOutcome:
+        """A step of ``h`` [s] the host declared open, from the host's ``delta`` [m], ``delta_dot``
+        [m/s] at its start (rule 8; the caller checked :meth:`can_skip`): the structures' motion
+        learnt as after any step, no force, no onset, no flight predicted.  ``delta_end``,
+        ``delta_dot_end`` are the host's values at the step start; the next step starts from the
+        host's state."""
+        self._follow(delta, delta_dot, h)
+        if self.follow_host:
+            self.observer.record(0.0, h, 0.0, (0.0, delta_dot, delta_dot))
+        self.offset = 0.0
+        self.just_separated = False
+        self.after_open = True
+        self.delta_end, self.delta_dot_end = delta, delta_dot
+        self.rate0 = delta_dot
+        self.stepped = True
+        return StepOutcome()
 
     def _probe(self, h: float, span: float) -> float:
         """Impulse [N s] the resolver's own bodies will receive over ``span`` s after this step."""
@@ -412,14 +449,17 @@ class ImpactResolver:
 
     def _flight_start(self, delta: float, delta_dot: float):
         """Internal (penetration, rate) out of contact at the step start; sets ``offset`` (rule 5)."""
-        if self.follow_host and self.stepped and self.observer.pending():
+        # after a step skipped as declared open (rule 8) the host's state is the truth, as at a run's start
+        followed = self.follow_host and self.stepped and not self.after_open
+        self.after_open = False
+        if followed and self.observer.pending():
             # part of an impulse is still on its way to the host: the resolver's own flight
             d0, v0 = self.delta_end, self.delta_dot_end
             self.offset = max(0.0, delta - d0) if delta > 0.0 else 0.0
             if d0 > 0.0:
                 self.offset, d0 = self.offset + d0, 0.0
             return d0, v0
-        if self.follow_host and self.stepped:
+        if followed:
             inner = self.delta_end               # internal flight, predicted over the last step
         else:
             inner = self.delta_end if self.just_separated else delta - self.offset

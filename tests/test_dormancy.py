@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from cosim.fmus import POUNDING, fmu_spec
-from cosim.master.dormancy import hermite
+from cosim.master.dormancy import ORDINARY_STEPS, hermite
 from cosim.master.loader import bundled_scenes, load_scene
 from cosim.master.models import storeys_are_linear
 from cosim.master.results import summarize
 from cosim.master.simulate import simulate
+from cosim.master.steplog import LoggedContact
 from cosim.master.system import System
+from cosim.peers import hosts
 from fmu_src.contact_laws import law_for
 from fmu_src.resolver import ImpactResolver
 from scenario_checks import simulate_scene
@@ -24,9 +26,10 @@ from test_coupling_without_fmus import FakeFmu, building
 @pytest.mark.parametrize("name", bundled_scenes())
 def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
     """Identical impacts and onsets, peak forces and dissipated energy within 0.1 % (measured:
-    equal to 1e-6 or better; the catch-up's longer steps out of contact change only how the
-    contact learns the buildings' motion before it wakes).  Base steps on both sides: a long
-    step is taken only by a sleeping contact (test_long_steps_keep_the_impacts)."""
+    bit for bit: the contact learns the buildings' motion from its last skipped steps, which it
+    takes as it would have; the step declared open before them holds no contact).  Base steps
+    on both sides: a long step is taken only by a sleeping contact
+    (test_long_steps_keep_the_impacts)."""
     if load_scene(name, [], catalog).coupling != "adaptive":
         # a fixed-step coupling calls every instance at every step: nothing sleeps
         fixed = simulate_scene(catalog, name)
@@ -54,6 +57,10 @@ def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
         called = sum(asleep.cost.do_steps[c.name] for c in asleep.scene.contacts)
         assert called == len(asleep.scene.contacts) * attempts - stats["dormant_steps"] + stats["catch_up_steps"]
         assert called < 0.5 * len(asleep.scene.contacts) * attempts
+        # a catch-up costs at most 1 + ORDINARY_STEPS doSteps whatever the length slept (the
+        # declared open step, dormancy.py), and none is redone
+        assert stats["catch_up_replays"] == 0
+        assert stats["catch_up_steps"] <= (1 + ORDINARY_STEPS) * stats["catch_ups"]
 
 
 @pytest.mark.parametrize("name", bundled_scenes())
@@ -87,6 +94,10 @@ def test_long_steps_keep_the_impacts(catalog, name):
         assert long.cost.communication_steps < 0.25 * base.cost.communication_steps
         rel_force, rel_energy = 2e-3, 3e-3
     assert b.impacts == a.impacts
+    # the sleeps through long steps cost no more to catch up than short ones (dormancy.py)
+    if long.stats["catch_ups"]:
+        assert long.stats["catch_up_replays"] == 0
+        assert long.stats["catch_up_steps"] <= (1 + ORDINARY_STEPS) * long.stats["catch_ups"]
     # states are saved only before steps that could be rejected (adaptive.SAVE_SPEED_MARGIN):
     # no closure was found in a step taken without a saved state
     assert long.stats["missed_events"] == base.stats["missed_events"] == 0
@@ -217,19 +228,31 @@ def test_free_vibration_wakes_for_its_first_impact(catalog):
     assert asleep.final["pounding_1.F_max"] == pytest.approx(awake.final["pounding_1.F_max"], rel=1e-9)
 
 
-def test_catch_up_pieces_are_bounded_in_seconds_at_a_coarse_base_step(catalog):
-    """free_vibration at a 20 ms base step: catch-up pieces of 4 base steps (0.08 s) started a
-    sixth impact the reference does not have (8.7 % energy); pieces capped at
-    MAX_CATCH_UP_SPAN keep the reference's 5 impacts, as the run without sleeping contacts does."""
-    from cosim.master.coupling.adaptive import MAX_CATCH_UP_SPAN
+def test_a_catch_up_costs_three_doSteps_at_a_coarse_base_step(catalog, monkeypatch):
+    """free_vibration at a 20 ms base step (sleeps of up to 0.5 s): the run with sleeping contacts
+    keeps the reference's 5 impacts and the peak force of the run without them, each catch-up
+    in at most 3 doSteps, whatever the length of its last steps (a catch-up in 0.08 s pieces
+    gave a sixth impact before the steps were declared open).  Without the declaration
+    (``gap_open`` never set) the same catch-ups extrapolate the structures' motion over the
+    skipped interval, find impacts the proof excludes and are redone step by step: the test
+    that can fail."""
     asleep = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True)
     awake = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=False)
-    too_long = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True, catch_up_span=0.08)
-    assert MAX_CATCH_UP_SPAN < 0.08
-    assert asleep.stats["dormant_steps"] > 0
-    assert asleep.final["pounding_1.impacts"] == awake.final["pounding_1.impacts"] == 5
-    assert too_long.final["pounding_1.impacts"] == 6      # the failure the cap prevents (a test that can fail)
-    assert asleep.final["pounding_1.F_max"] == pytest.approx(awake.final["pounding_1.F_max"], rel=1e-3)
+    long_pieces = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True, catch_up_span=0.08)
+    for run in (asleep, long_pieces):
+        stats = run.stats
+        assert stats["dormant_steps"] > 50 and stats["catch_up_replays"] == 0
+        assert stats["catch_up_steps"] <= (1 + ORDINARY_STEPS) * stats["catch_ups"]
+        assert run.final["pounding_1.impacts"] == awake.final["pounding_1.impacts"] == 5
+        # 1e-3: the issue's criterion (measured 5e-14 and 4e-6: the buildings take long steps
+        # while the contact sleeps, base steps without sleeping)
+        assert run.final["pounding_1.F_max"] == pytest.approx(awake.final["pounding_1.F_max"], rel=1e-3)
+        assert run.final["pounding_1.E_dissipated"] == pytest.approx(awake.final["pounding_1.E_dissipated"], rel=1e-3)
+    monkeypatch.setattr(LoggedContact, "declare_open", lambda self, gap_open: None)
+    undeclared = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True)
+    assert undeclared.stats["catch_up_replays"] >= 3          # measured: 6 of 6
+    assert undeclared.stats["catch_up_steps"] > 5 * undeclared.stats["catch_ups"]
+    assert undeclared.final["pounding_1.impacts"] == 5        # the replays restore the results
 
 
 # -- why resolved contacts take no long step yet --------------------------------------------------------------
@@ -292,3 +315,134 @@ def test_a_rollback_restores_a_contact_that_slept_through_the_save(catalog):
     assert lean.columns == full.columns
     np.testing.assert_array_equal(lean.time, full.time)
     np.testing.assert_array_equal(lean.values, full.values)
+
+
+# -- a step declared open, at the physics level (fmu_src/resolver.py, rule 8) ------------------------------
+def _oscillators(host, integrator, sleeps=frozenset(), h=0.01, steps=400):
+    """The two oscillators of the host matrix (cosim/peers/hosts.py: 5 impacts in 4 s) in an exact
+    Gauss-Seidel host, the contact sleeping over the steps ``sleeps`` and caught up as the
+    master does (dormancy.py): one step declared open up to its last ORDINARY_STEPS skipped
+    steps, then those, declared open too.  Returns (resolver, bodies, per step (F, in contact,
+    delta at the start), doSteps, longest declared step)."""
+    case = hosts.two_oscillators()
+    body = hosts.INTEGRATORS[integrator](case.structure, case.x0, case.v0)
+    r = ImpactResolver(case.contacts[0].law, host=host)
+    log, skipped, calls, longest = [], [], 0, 0.0
+    for k in range(steps):
+        t = k * h
+        u = (body.x[0] - body.x[1] - 0.01, body.v[0] - body.v[1])
+        if k in sleeps:
+            skipped.append((t, u))
+            F = 0.0
+        else:
+            if skipped:
+                last = skipped[-ORDINARY_STEPS:]
+                if last[0][0] > skipped[0][0]:
+                    r.step(*skipped[0][1], last[0][0] - skipped[0][0], gap_open=True)
+                    calls += 1
+                    longest = max(longest, last[0][0] - skipped[0][0])
+                for _, uk in last:
+                    assert r.step(*uk, h, gap_open=True).impulse == 0.0
+                    calls += 1
+                skipped = []
+            F = r.step(*u, h).mean_force
+            calls += 1
+        log.append((F, r.in_contact, u[0]))
+        body.advance(h, np.array([-F, F]))
+    return r, body, log, calls, longest
+
+
+def _quiet_steps(log, margin=0.005):
+    """Steps a master may sleep through: no force over the last 4 steps (every standard host has
+    received every impulse), out of contact, the bodies ``margin`` m apart at both ends."""
+    return frozenset(k for k in range(4, len(log) - 1)
+                     if all(log[j][0] == 0.0 and not log[j][1] for j in range(k - 4, k + 1))
+                     and log[k][2] < -margin and log[k + 1][2] < -margin)
+
+
+@pytest.mark.parametrize("host, integrator", [("zoh", "zoh"), ("trapezoidal", "newmark"), ("any", "zoh")])
+def test_a_declared_catch_up_gives_the_impacts_of_the_awake_contact(host, integrator):
+    """Whatever the length slept (here up to 0.5 s), a catch-up of one step declared open and
+    the last two skipped steps leaves the contact learning the structures' motion as it would
+    have: every later impact is the awake contact's, bit for bit, for a host with exact positions
+    (zoh: learnt from the last step) and one without (Newmark: the last two), in a third of the
+    doSteps.  A host that declares nothing ('any') sleeps here only once its kernel is known
+    (the first impact has shown it): before, the scatter of the structural predictions that
+    weighs the identification is measured on fewer steps (sleeping through 0.04-0.17 s: no
+    kernel found at the first impact, F_max -0.3 %, energy -1 %; docs/fmi_hosts.md)."""
+    awake, body_awake, log, calls_awake, _ = _oscillators(host, integrator)
+    sleeps = _quiet_steps(log)
+    if host == "any":
+        sleeps = frozenset(k for k in sleeps if k > 30)      # after the first impact (0.17-0.25 s)
+        assert awake.observer.kernel == (1.0,)
+    asleep, body_asleep, _, calls, longest = _oscillators(host, integrator, sleeps)
+    assert awake.impacts == asleep.impacts >= 5 and longest >= 0.4
+    assert asleep.F_max == awake.F_max and asleep.dissipated_energy() == awake.dissipated_energy()
+    np.testing.assert_array_equal(body_asleep.x, body_awake.x)
+    assert calls < 0.5 * calls_awake
+
+
+def test_an_undeclared_long_step_starts_impacts_a_declared_one_does_not():
+    """The spurious onsets of a 0.32 s step (spurious_onsets below) are the extrapolation of the
+    structures' motion over it: declared open, the same step starts none and gives no force,
+    and the contact's reported state is the host's at the step start."""
+    law = law_for("jankowski", 2.75e9, 1.5, 3e5, 3e5, 0.65, -1.0)
+    delta = lambda t: (-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t))
+    declared = 0
+    for t_sleep in np.arange(0.5, 1.2, 0.1):
+        r = ImpactResolver(law)
+        t = 0.0
+        while t < t_sleep - 1e-9:
+            r.step(*delta(t), 0.01)
+            t += 0.01
+        out = r.step(*delta(t), 0.32, gap_open=True)
+        declared += out.impacts_started
+        assert out.impulse == 0.0 and (r.delta_end, r.delta_dot_end) == delta(t) and not r.in_contact
+    assert declared == 0 and spurious_onsets(0.32) > 0
+
+
+def _free_masses(steps, declared, v=1.0, h=1e-3, gap_start=-2.5e-3, law=None):
+    """Two free 1e5 kg masses closing at ``v`` m/s from ``gap_start`` m, an exact host; the steps in
+    ``declared`` are declared open (wrongly, where the masses meet).  Returns (forces [N],
+    kinetic energy at the start and the end [J], resolver)."""
+    law = law or law_for("jankowski", 2.75e9, 1.5, 1e5, 1e5, 0.65)
+    r = ImpactResolver(law, host="zoh")
+    x1, v1, x2, v2 = gap_start, v, 0.0, 0.0
+    forces = []
+    for k in range(steps):
+        F = r.step(x1 - x2, v1 - v2, h, gap_open=k in declared).mean_force
+        forces.append(F)
+        x1, v1 = x1 + v1 * h - 0.5 * F / 1e5 * h * h, v1 - F / 1e5 * h
+        x2, v2 = x2 + v2 * h + 0.5 * F / 1e5 * h * h, v2 + F / 1e5 * h
+    return np.array(forces), 0.5 * 1e5 * v * v, 0.5 * 1e5 * (v1 * v1 + v2 * v2), r
+
+
+def test_a_wrong_declaration_is_safe():
+    """A host whose declaration is wrong gets a contact that neither creates energy nor pulls:
+    (1) declared open at a step that starts overlapping: taken in full, as undeclared;
+    (2) declared open over the step in which the masses meet (2.5 ms apart at 1 m/s, a 3 ms
+    step): no force in it, the overlap at its end is left alone (rule 5: offset) and the contact
+    begins there from zero penetration: the masses rebound, with less kinetic energy than
+    they had, every force finite and >= 0;
+    (3) declared open while an impact is in progress: taken in full (can_skip), as undeclared."""
+    # (1) the first step already overlaps: the declaration is not honoured
+    undeclared = _free_masses(30, (), gap_start=1e-4)
+    wrong = _free_masses(30, (0, 1, 2), gap_start=1e-4)
+    np.testing.assert_array_equal(wrong[0], undeclared[0])
+    # (2) the meeting inside a declared step
+    forces, E0, E1, r = _free_masses(40, (0,), h=3e-3)
+    assert forces[0] == 0.0 and forces.max() > 0.0
+    assert np.all(np.isfinite(forces)) and np.all(forces >= 0.0)
+    assert r.impacts == 1 and not r.in_contact and r.offset == 0.0
+    assert E1 < E0 and r.dissipated_energy() > 0.0
+    # the contact began from zero penetration at the approach speed: it rebounds as the law
+    # does (CR 0.65; 0.05: the undeclared contact's own departure at this step, measured 0.003)
+    reference = _free_masses(40, (), h=3e-3)[3]
+    assert r.last_CR == pytest.approx(reference.last_CR, abs=0.05)
+    assert reference.last_CR == pytest.approx(0.65, abs=0.05)
+    # (3) in contact: a declaration changes nothing
+    ref = _free_masses(12, ())
+    busy = [k for k in range(12) if ref[0][k] > 0.0]
+    assert busy
+    again = _free_masses(12, busy[1:])          # the steps that start in contact
+    np.testing.assert_array_equal(again[0], ref[0])

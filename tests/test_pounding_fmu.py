@@ -193,6 +193,43 @@ def test_no_spurious_impact_after_residual_overlap(host):
     assert host.integer("impacts") == 1
 
 
+def test_a_step_declared_open_is_skipped_and_a_wrong_declaration_logged(host):
+    """gap_open (docs/fmi_hosts.md, 'Declaring a step open'): a correct declaration over a long
+    step gives no force and no message; free masses 2.5 mm apart at 1 m/s declared open over the
+    3 ms step in which they meet get no force in it, a warning naming gap_open and the time when
+    the overlap shows at its end, then one impact with finite, compressive forces that leaves
+    them less kinetic energy; a declaration at a step that starts overlapping is logged and the
+    step taken in full."""
+    m, v, h = 1e5, 1.0, 3e-3
+    host.setup("jankowski", True, k=2.75e9, m1=m, m2=m, gap=0.0)
+    x1, v1, x2, v2, t = -0.5, v, 0.0, 0.0, 0.0
+    host.fmu.setBoolean([host.vr["gap_open"]], [True])
+    assert host.step(t, 0.4, x1, v1, x2, v2) == 0.0            # 0.4 m apart, 0.4 s: proven open
+    assert not [msg for _, msg in host.messages if "gap_open" in msg]
+    assert host.real("delta") == [-0.5]                         # the inputs at the step start
+    t, x1 = 0.4, -2.5e-3
+    forces = []
+    for k in range(40):
+        host.fmu.setBoolean([host.vr["gap_open"]], [k == 0])
+        F = host.step(t, h, x1, v1, x2, v2)
+        forces.append(F)
+        x1, v1 = x1 + v1 * h - 0.5 * F / m * h * h, v1 - F / m * h
+        x2, v2 = x2 + v2 * h + 0.5 * F / m * h * h, v2 + F / m * h
+        t += h
+    warned = [(status, msg) for status, msg in host.messages if "gap_open" in msg]
+    assert len(warned) == 1 and warned[0][0] == 1                # fmi2Warning
+    assert "t = 0.403 s" in warned[0][1] and "from t = 0.4 s" in warned[0][1] and "overlap by 0.0005" in warned[0][1]
+    assert forces[0] == 0.0 and all(math.isfinite(f) and f >= 0.0 for f in forces)
+    assert host.integer("impacts") == 1 and not host.boolean("in_contact")
+    assert 0.5 * m * (v1 * v1 + v2 * v2) < 0.5 * m * v * v
+    # declared at a step that starts overlapping: logged, and the step is taken in full
+    host.setup("jankowski", True, k=2.75e9, m1=m, m2=m, gap=0.0)
+    host.fmu.setBoolean([host.vr["gap_open"]], [True])
+    assert host.step(0.0, 1e-3, 1e-4, v, 0.0, 0.0) > 0.0
+    assert any("gap_open = true, but the bodies overlap by 0.0001 m at the step start" in msg
+               for _, msg in host.messages)
+
+
 @pytest.mark.parametrize("model", ["jankowski", "hunt_crossley"])
 def test_plain_mode_converges_and_balances_energy(host, model):
     # Plain mode (force law on the inputs only) needs steps far below the contact duration;

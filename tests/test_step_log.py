@@ -62,7 +62,7 @@ def test_a_restored_state_takes_its_steps_out_of_the_log():
     assert contact.freed == [saved] and contact.calls == 0     # the rest is the instance's
     contact.do_step(0.01, 0.01)
     contact.reset()
-    assert len(contact.steps()) == 0 and contact.steps().table.shape == (0, 6)
+    assert len(contact.steps()) == 0 and contact.steps().table.shape == (0, 7)   # t, h, 4 inputs, gap_open
 
 
 def _assert_replay_is_the_fmu(result):

@@ -6,30 +6,32 @@ outputs stay those of its last step (``F = 0``: it was out of contact), and the 
 what it would have been given, the floors' states at the start of each skipped step.
 
 When the gap may close again (or the run ends) the contact *wakes* and catches up, so that it
-is at the same time as the others and in the state it would have had:
+is at the same time as the others and in the state it would have had, in at most
+``1 + ORDINARY_STEPS`` doSteps whatever the length slept, every one declared open (``pounding.fmu``
+input ``gap_open``, :meth:`LoggedContact.declare_open`: the master proved the gap open over
+them, so the contact does no onset search and predicts no flight over them, fmu_src/resolver.py
+rule 8):
 
-1. steps of up to ``span`` over the skipped interval up to the start of the last skipped step,
-   each from the floors' states at its start: a skipped interval is a longer step out of
-   contact;
-2. the last skipped step, from the floors' states at its start, as it would have been taken:
-   the contact FMU learns the structures' motion from its last step (``fmu_src/resolver.py``,
-   rule 1), so the step that follows is the one it would have taken without sleeping.
+1. one step over the skipped interval up to the start of its last ``ORDINARY_STEPS`` steps,
+   from the floors' states at its start;
+2. the last ``ORDINARY_STEPS`` skipped steps as they would have been taken, each from the
+   floors' states at its start: the contact learns the structures' motion from the host's
+   increments over its last steps (rule 1: the extrapolation of the means of its last two
+   steps), so the step that follows is the one it would have taken without sleeping.
 
 A skipped step longer than ``span`` (a long step of the adaptive master, which only an asleep
-contact ever sees) is given to the contact in equal pieces of at most ``span``, the floors'
-states inside it interpolated between its ends (cubic Hermite: positions from the positions and
-velocities at both ends, velocities its derivative).  A resolved contact extrapolates the
-structures' motion of its last step over the next one (linearly in acceleration): over a 0.32 s
-step that extrapolation crosses gaps the floors never close, over ``span`` (4 base steps, at most 0.04 s) it
-does not (tests/test_dormancy.py).  Only the flight out of contact depends on these states, and
-the proof says there is no contact in them.
+contact ever sees) that holds one of those last steps is cut into equal pieces of at most
+``span``, the floors' states inside it interpolated between its ends (cubic Hermite: positions
+from the positions and velocities at both ends, velocities its derivative): the contact's
+prediction of the step after the catch-up is learnt from them.
 
 The master proved the gap open over the whole interval, so the catch-up must leave the
 contact as it was (no impact, no dissipation, no force).  A contact FMU that nevertheless
-finds an impact there (its own prediction of the structures' motion over a long step
-disagrees with the proof) is restored to its state when it fell asleep (saved then with
-``fmi2GetFMUstate``) and given every skipped step as it would have had them
-(``stats["catch_up_replays"]``): results are then exactly those of a run without sleeping.
+finds an impact there (one that took a declared step in full: an impact in progress, an
+impulse still on its way) is restored to its state when it fell asleep (saved then with
+``fmi2GetFMUstate``) and given every skipped step as it would have had them, undeclared, a step
+longer than ``span`` in pieces as above (``stats["catch_up_replays"]``): results are then those
+of a run without sleeping.
 
 Counters in ``stats``: ``dormant_steps`` (contact steps not called), ``catch_ups``,
 ``catch_up_steps`` (the doSteps they made), ``catch_up_replays``.  Every step attempt calls a
@@ -48,6 +50,12 @@ import numpy as np
 if TYPE_CHECKING:
     from .system import Node, System
 
+#: ordinary steps that end a catch-up: the resolver extrapolates the structures' acceleration
+#: from the means of its last two steps (fmu_src/host_observer.py, ``HostObserver._predict``), so
+#: after two ordinary steps its prediction of the next step is the one it makes without sleeping
+#: (a host with exact positions, ``host = "zoh"``: after one)
+ORDINARY_STEPS = 2
+
 
 @dataclass
 class _Sleep:
@@ -63,6 +71,7 @@ class Dormancy:
     """Which contact FMUs sleep and how they catch up (module docstring)."""
 
     def __init__(self, system: "System", stats: dict, span: float):
+        """``span`` [s]: the longest ordinary catch-up step (module docstring)."""
         if not (span > 0.0 and math.isfinite(span)):
             raise ValueError(f"catch-up span = {span!r} s must be > 0")
         self.span = float(span)
@@ -115,33 +124,25 @@ class Dormancy:
         if sleep is None:
             return
         self.stats["catch_ups"] += 1
-        skipped = self._split(node, sleep.skipped)
+        skipped = sleep.skipped
+        tail = self._tail(node, skipped)
+        t0, _, u0 = skipped[0]
+        steps = ([(t0, tail[0][0] - t0, u0)] if tail[0][0] > t0 else []) + tail
         inst, inputs = node.instance, node.inputs
-        # pieces of consecutive skipped steps spanning at most `span` (a longer skipped step is a
-        # piece alone), each from the floors' states at its start; then the last skipped step alone
-        last = len(skipped) - 1
-        k = 0
-        while k < last:
-            t0, _, u0 = skipped[k]
-            end = k + 1
-            while end < last and skipped[end + 1][0] - t0 <= self.span * (1.0 + 1e-9):
-                end += 1
-            inputs.set(u0)
-            inst.do_step(t0, skipped[end][0] - t0)
-            self.stats["catch_up_steps"] += 1
-            k = end
-        t, h, u = skipped[-1]
-        inputs.set(u)
-        inst.do_step(t, h)
-        self.stats["catch_up_steps"] += 1
+        inst.declare_open(True)             # the proof holds over every one of them
+        for t, h, u in steps:
+            inputs.set(u)
+            inst.do_step(t, h)
+        inst.declare_open(False)
+        self.stats["catch_up_steps"] += len(steps)
         node.push()
         node.integers.get()
         now = self.system.y[self._quiet[node.name]]
-        if len(skipped) > 1 and (self._impacts(node) != sleep.impacts or not np.array_equal(now, sleep.outputs)):
+        if self._impacts(node) != sleep.impacts or not np.array_equal(now, sleep.outputs):
             # the contact found what the proof excludes: redo the interval as it would have been
             self.stats["catch_up_replays"] += 1
             inst.set_state(sleep.state)
-            for t, h, u in skipped:
+            for t, h, u in (piece for k in range(len(skipped)) for piece in self._pieces(node, skipped, k)):
                 inputs.set(u)
                 inst.do_step(t, h)
                 self.stats["catch_up_steps"] += 1
@@ -149,27 +150,31 @@ class Dormancy:
             node.integers.get()
         self._retired.append((inst, sleep.state))
 
-    def _split(self, node: "Node", skipped: list) -> list:
-        """``skipped`` with every step longer than ``span`` cut into equal pieces of at most
-        ``span``, the inputs inside interpolated (module docstring)."""
+    def _tail(self, node: "Node", skipped: list) -> list:
+        """The last ``ORDINARY_STEPS`` steps of ``skipped`` as the contact takes them, ``(t, h,
+        inputs)``: a skipped step longer than ``span`` cut into pieces (module docstring)."""
+        tail: list = []
+        k = len(skipped)
+        while len(tail) < ORDINARY_STEPS and k > 0:
+            k -= 1
+            tail[:0] = self._pieces(node, skipped, k)
+        return tail[-ORDINARY_STEPS:]
+
+    def _pieces(self, node: "Node", skipped: list, k: int) -> list:
+        """Skipped step ``k`` as ``(t, h, inputs)`` pieces: itself, or when longer than ``span``
+        equal pieces of at most ``span``, the inputs inside interpolated (module docstring)."""
+        t, h, u0 = skipped[k]
         pairs = self._pairs[node.name]
-        if pairs is None or all(h <= self.span * (1.0 + 1e-9) for _, h, _ in skipped):
-            return skipped
+        if pairs is None or h <= self.span * (1.0 + 1e-9):
+            return [skipped[k]]
         ix, iv = pairs
-        out = []
-        for k, (t, h, u0) in enumerate(skipped):
-            if h <= self.span * (1.0 + 1e-9):
-                out.append((t, h, u0))
-                continue
-            if k + 1 < len(skipped):
-                u1 = skipped[k + 1][2]
-            else:                                       # the last skipped step ends now
-                u1 = np.empty(node.A.shape[0])
-                node._inputs(self.system.y, u1)
-            m = math.ceil(h / self.span - 1e-9)
-            for j in range(m):
-                out.append((t + j * h / m, h / m, hermite(u0, u1, ix, iv, h, j / m)))
-        return out
+        if k + 1 < len(skipped):
+            u1 = skipped[k + 1][2]
+        else:                                       # the last skipped step ends now
+            u1 = np.empty(node.A.shape[0])
+            node._inputs(self.system.y, u1)
+        m = math.ceil(h / self.span - 1e-9)
+        return [(t + j * h / m, h / m, hermite(u0, u1, ix, iv, h, j / m)) for j in range(m)]
 
     def wake_all(self) -> None:
         for node in self.system.contacts:

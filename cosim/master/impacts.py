@@ -10,8 +10,8 @@ in it):
 
 * ``resolve_impacts = true``: a fresh :class:`fmu_src.resolver.ImpactResolver` built from the
   same parameters (:func:`cosim.master.models.contact_law`) takes every logged step with the
-  same ``delta = x1 - x2 - gap`` and ``delta_dot = v1 - v2`` (computed as the FMU does) and step
-  length; it records every accepted internal point.  The resolver is deterministic, so the
+  same ``delta = x1 - x2 - gap`` and ``delta_dot = v1 - v2`` (computed as the FMU does), step
+  length and ``gap_open`` declaration; it records every accepted internal point.  The resolver is deterministic, so the
   replay is the FMU's own trajectory: its contacts, onsets and peak forces are the FMU's
   outputs bit for bit (tests/test_step_log.py).  Cost: the contact FMU's own arithmetic without the FMI calls.
 * ``resolve_impacts = false``: a fresh :class:`fmu_src.plain_contact.PlainContact` takes the
@@ -71,6 +71,7 @@ def replay_contact(result: "SimulationResult", contact: str) -> list[ContactTraj
     # the FMU computes delta and its rate from its inputs in this order (x1 - x2 - gap, v1 - v2)
     delta = steps.input("x1") - steps.input("x2") - gap
     rate = steps.input("v1") - steps.input("v2")
+    declared = steps.input("gap_open") != 0.0     # steps the master declared open (dormancy.py)
     t, h = steps.t, steps.h
     depth = float(spec.value("graze_depth"))
     if bool(spec.value("resolve_impacts")):
@@ -88,7 +89,7 @@ def replay_contact(result: "SimulationResult", contact: str) -> list[ContactTraj
     for k in range(len(steps)):
         started, points = model.started, len(trace)
         tk, dk = float(t[k]), float(delta[k])
-        force = model.step(dk, float(rate[k]), float(h[k]))
+        force = model.step(dk, float(rate[k]), float(h[k]), bool(declared[k]))
         if model.started != started:
             # several contacts beginning in one step: only the last one's onset is known exactly
             for number in range(started + 1, model.started + 1):

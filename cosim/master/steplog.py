@@ -8,11 +8,12 @@ own (:mod:`cosim.master.dormancy`), and rows are kept at an output interval.  So
 beside the rows:
 
 * :class:`LoggedContact`: every ``fmi2DoStep`` a contact FMU is given, with the start time, the
-  step length and the inputs set before it (``t, h, x1, v1, x2, v2``: 6 floats).  It wraps the
+  step length and the inputs set before it (``t, h, x1, v1, x2, v2, gap_open``: 7 floats; the
+  last, 1 for a step the master declared open, :meth:`LoggedContact.declare_open`).  It wraps the
   contact's instance, so the one place it appends is the one place every coupling, catch-up and
   replay steps a contact; a rejected step is taken out again when its FMU state is restored
   (``fmi2SetFMUstate`` truncates the log to its length when the state was saved).  Default
-  scene: 1188 rows (4012 without dormancy and long steps).
+  scene: 259 rows (4012 without dormancy and long steps).
 * :class:`ContactWindowLog`: at every accepted step in which some contact holds a force (or held
   one the step before), the step's ends and, at both ends, every floor's ``x, v, a`` of the
   buildings that pound and every contact's ``F``, with each such building's inputs over the
@@ -42,7 +43,7 @@ class ContactSteps:
     """Every ``fmi2DoStep`` one contact FMU was given, in order: ``table[k] = (t, h, inputs...)``
     (s, s, then the inputs named ``inputs`` as set before the step)."""
 
-    inputs: tuple[str, ...]
+    inputs: tuple[str, ...]         # the Real inputs, then ``gap_open`` (1.0: the step was declared open)
     table: np.ndarray
 
     def __len__(self) -> int:
@@ -65,15 +66,18 @@ class LoggedContact:
 
     Everything else is the wrapped instance's (attribute access is forwarded): ports, counters,
     messages.  ``get_state`` notes the log's length with the state, ``set_state`` cuts the log back
-    to it, ``reset`` empties it."""
+    to it, ``reset`` empties it.  :meth:`declare_open` sets the FMU's ``gap_open`` input, logged
+    with every step."""
 
     def __init__(self, instance: Any, inputs: Any):
         self._instance = instance
         self._values = inputs.values            # the input port's buffer: what the last set sent
-        self._names = tuple(inputs.names)
+        self._names = tuple(inputs.names) + ("gap_open",)
         self._width = 2 + len(self._names)
-        self._log = array("d")                  # rows of (t, h, inputs...), 8 bytes a number
+        self._log = array("d")                  # rows of (t, h, inputs..., gap_open), 8 bytes a number
         self._marks: dict[int, tuple[Any, int]] = {}    # id(state) -> (state, log length then)
+        self._open = 0.0                        # gap_open as last set (1.0: true)
+        self._open_port: Any = None             # made at the first declaration
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._instance, name)
@@ -84,6 +88,17 @@ class LoggedContact:
         log.append(t)
         log.append(h)
         log.fromlist(self._values.tolist())
+        log.append(self._open)
+
+    def declare_open(self, gap_open: bool) -> None:
+        """Set the contact FMU's Boolean input ``gap_open``: the coming steps are proven open (true)
+        or not (false) (fmu_src/pounding_slave.py).  The master declares one step open and clears
+        the declaration right after it (:meth:`cosim.master.dormancy.Dormancy.wake`), so no FMU
+        state it saves holds a declaration (the FMU's state would restore it, this log would not)."""
+        if self._open_port is None:
+            self._open_port = self._instance.boolean_port(["gap_open"])
+        self._open_port.set([1 if gap_open else 0])
+        self._open = 1.0 if gap_open else 0.0
 
     def get_state(self) -> Any:
         state = self._instance.get_state()
