@@ -130,10 +130,12 @@ class Dormancy:
         steps = ([(t0, tail[0][0] - t0, u0)] if tail[0][0] > t0 else []) + tail
         inst, inputs = node.instance, node.inputs
         inst.declare_open(True)             # the proof holds over every one of them
-        for t, h, u in steps:
-            inputs.set(u)
-            inst.do_step(t, h)
-        inst.declare_open(False)
+        try:
+            for t, h, u in steps:
+                inputs.set(u)
+                inst.do_step(t, h)
+        finally:                            # no later step, saved state or replay inherits it
+            inst.declare_open(False)
         self.stats["catch_up_steps"] += len(steps)
         node.push()
         node.integers.get()
