@@ -57,6 +57,10 @@ GRID = 64
 #: at ``|d - s| = dy`` to round-off (~1e-16 dy: the master reads ``s`` through ``drift_residual``),
 #: which this margin refuses; it costs 1e-6 of the elastic range
 ELASTIC_MARGIN = 1e-6
+#: a storey is taken as yielding now, without a proof, when its drift lies this fraction of its yield
+#: drift beyond the elastic range (a yielding storey lies ELASTIC_MARGIN beyond it; the drift's
+#: round-off, ~1e-15 of the floor displacements, is far below 1e-9 of a yield drift)
+YIELDING_SLACK = 1e-9
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
 _POINTS = np.arange(GRID + 1, dtype=float)
 
@@ -249,6 +253,7 @@ class ElasticRange:
     def __init__(self, alpha: float, yield_drift: np.ndarray, residual: np.ndarray):
         self.alpha = float(alpha)
         self.half_width = (1.0 - ELASTIC_MARGIN) * np.asarray(yield_drift, dtype=float)
+        self.slack = YIELDING_SLACK * np.asarray(yield_drift, dtype=float)
         self.residual = residual
 
     def shift(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -256,6 +261,16 @@ class ElasticRange:
         linear (m) and the centre of each storey's elastic range in ``D w`` (m)."""
         r = y[self.residual]
         return np.cumsum(r), self.alpha / (1.0 - self.alpha) * r
+
+    def yielding(self, w: np.ndarray, centre: np.ndarray) -> bool:
+        """A storey yields now, beyond doubt: its drift about the shift, from the floors' ``w =
+        u - u_s`` (m), lies outside its elastic range by more than :data:`YIELDING_SLACK` of the
+        yield drift.  :meth:`horizon` would then say 0 (its drifts come through the modes, which
+        differ from ``D w`` by round-off, ~1e-15 of the displacements); checked first, because
+        a yielding building is proven again at every step and fails at once."""
+        d = w.copy()
+        d[1:] -= w[:-1]
+        return bool((np.abs(d - centre) >= self.half_width + self.slack).any())
 
     def horizon(self, motion: FloorMotion, centre: np.ndarray, H: float) -> float:
         """Longest ``s <= H`` (s) over which every storey provably stays elastic."""
@@ -372,37 +387,50 @@ class OpenGaps:
                  which: Sequence[int] | None = None) -> list[float]:
         """For each contact level (or those in ``which``): how long (s, <= ``H``) its gap provably
         stays open from now, with ``ground[k]`` bounding ``|ag|`` up to grid point ``k`` and
-        ``forces`` (building -> force per floor, N) held over the horizon.
+        ``forces`` (building -> force per floor, N) held over the horizon.  ``ground`` may be
+        a function that returns it: called once, only if a building's motion is needed (a
+        yielding building ends the proof before).
 
         The levels between the same two buildings are proven together (one array operation
         each, as :func:`open_horizon` does for one level, with the same arithmetic)."""
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         forces = forces or {}
+        lazy = [ground] if callable(ground) else None
 
-        def motion(b):
-            m = motions.get(b)
-            if m is None:
+        def ground_bound():
+            if lazy is None:
+                return ground
+            if callable(lazy[0]):
+                lazy[0] = lazy[0]()
+            return lazy[0]
+
+        def linear_for(b):
+            s = linear.get(b)
+            if s is None:
                 bound, ix, iv = self.buildings[b]
                 elastic = self.elastic.get(b)
                 if elastic is None:
-                    m = motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, forces.get(b))
-                    linear[b] = H
+                    motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b))
+                    s = linear[b] = H
                 else:
                     shift, centre = elastic.shift(y)
-                    m = motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, forces.get(b), shift)
-                    linear[b] = elastic.horizon(m, centre, H)
-            return m
+                    if elastic.yielding(y[ix] - shift, centre):
+                        s = linear[b] = 0.0         # no proof: base steps
+                    else:
+                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b), shift)
+                        s = linear[b] = elastic.horizon(motions[b], centre, H)
+            return s
 
         pairs = self._pairs(which)
         out = [0.0] * sum(len(p[2]) for p in pairs)
         dS = H / GRID
         for left, right, positions, fl, fr, gap in pairs:
-            xl, bl, ll = motion(left).floors()
-            xr, br, lr = motion(right).floors()
-            s = min(linear[left], linear[right])
-            if s == 0.0:
+            s = linear_for(left)
+            if s == 0.0 or (s := min(s, linear_for(right))) == 0.0:
                 continue
+            xl, bl, ll = motions[left].floors()
+            xr, br, lr = motions[right].floors()
             delta = xl[fl] - xr[fr] - gap[:, None]
             # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
             upper = (0.5 * (delta[:, :-1] + delta[:, 1:]) + (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]

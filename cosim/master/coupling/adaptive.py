@@ -329,11 +329,15 @@ class Adaptive(CouplingStrategy):
     # -- the proof that gaps stay open ---------------------------------------------------------------
     def _ground_bound(self, t: float, H: float):
         """``|ag|`` bound ahead (:func:`~cosim.master.gap_bound.running_max_abs`): from the knots
-        read ahead, else the record's peak (the ground's ``pga`` output), else 0."""
+        read ahead, else the record's peak (the ground's ``pga`` output), else 0.  The ground
+        is read ahead now; the bound is a function, evaluated only if a proof needs it
+        (:meth:`~cosim.master.gap_bound.OpenGaps.horizons`)."""
         if self._look is None:
             return constant_bound(self.system.y.item(self._i_pga) if self._i_pga is not None else 0.0)
-        self._look.cover(t + H)
-        return running_max_abs(self._look.times, self._look.values, t, H)
+        look = self._look
+        look.cover(t + H)
+        times, values = look.times, look.values     # replaced, never changed in place, by the look-ahead
+        return lambda: running_max_abs(times, values, t, H)
 
     def _prove_quiet(self, t: float, H: float) -> float:
         """With no contact active: how long (s, <= H) every gap provably stays open from ``t``
