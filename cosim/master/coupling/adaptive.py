@@ -110,6 +110,8 @@ MAX_CATCH_UP_SPAN = 0.04
 #: call or two; a longer horizon is valid longer where the gaps are wide, and no shorter where
 #: they are not)
 QUIET_HORIZON = 8
+#: round-off slack (in base steps) on a proof's end time when a long step is fitted inside it
+PROOF_SLACK = 1e-9
 #: a step's closing speed, as a multiple of the planner's bound on it (``max(delta_dot, 0) + A s*``),
 #: up to which a closure inside the step is accepted without a rollback (:meth:`Adaptive._retry_step`
 #: accepts a step no longer than the closing step at the speed found): states are saved only for
@@ -359,9 +361,13 @@ class Adaptive(CouplingStrategy):
             return 0
         remaining = self.t_bound - t
         H = min(self.h_max * 2 ** -aligned[0], remaining) + self.h_max
-        if min(self._proven, default=math.inf) < t + H:
+        # a proof until t + H allows the longest aligned step: compared with a round-off slack
+        # (proven times are sums of floats: a proof that ends exactly at t + H would otherwise
+        # be taken as a hair short, and the step halved twice; measured on the default scene)
+        slack = PROOF_SLACK * self.h_max
+        if min(self._proven, default=math.inf) < t + H - slack:
             self._prove_quiet(t, H)
-        safe = min(self._proven, default=math.inf) - t - self.h_max
+        safe = min(self._proven, default=math.inf) - t - self.h_max + slack
         capacity = self._look.capacity if self._look is not None else None
         for lvl in aligned:
             h = self.h_max * 2 ** -lvl
