@@ -240,6 +240,8 @@ class Adaptive(CouplingStrategy):
             longest = max_long_step if row_interval is None else min(max_long_step, row_step(row_interval, self.h))
             self.long_levels = max(0, int(math.floor(math.log2(longest / self.h_max) + 1e-9)))
         self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
+        self._kinematics: list = []                        # each level's (delta, rate, its rate) at the step start
+        self._now_active: list = []                        # each level's _active at the step start
 
     def _knot_capacity(self) -> int:
         """Knots the ground FMU gives and every building takes (0: no knots)."""
@@ -303,16 +305,16 @@ class Adaptive(CouplingStrategy):
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, closures)``: the longest safe step (s) and, for each gap that may close,
         ``(s*, h_keep)``: the earliest closure (s) and the longest step (s) accepted whatever
-        closes in it (no state to save for it)."""
+        closes in it (no state to save for it), from each level's kinematics now
+        (``_kinematics``, read by :meth:`step`)."""
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
         closures = []
         proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
-        for lv, until in zip(self.levels, self._proven):
+        for lv, until, (d, dd, ddd) in zip(self.levels, self._proven, self._kinematics):
             if until >= proven:
                 continue
-            d, dd, ddd = lv.kinematics(y)
             if d > 0.0 or y.item(lv.i_F) > 0.0 or y.item(lv.i_delta) > 0.0:     # in contact
                 h_target = min(h_target, lv.in_contact_scale(d, dd, y.item(lv.i_vimp), self.contact_fraction))
                 continue
@@ -385,14 +387,20 @@ class Adaptive(CouplingStrategy):
         cap = math.inf
         finest = 0                                               # a retry must be finer than the rejected step
         saved = None
+        y = system.y
         while True:
+            # each level's kinematics and whether it has something to do, once per try (the
+            # floors do not move before the buildings step, a contact's outputs not before it does)
+            self._kinematics = start = [lv.kinematics(y) for lv in self.levels]
+            self._now_active = [y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or k[0] >= 0.0
+                                for lv, k in zip(self.levels, start)]
             h_target, closures = self._plan()
             level = max(self._dyadic_level(min(h_target, cap)), finest)
             level = max(level, max(self._level, 0) - 1)          # grow by at most a factor 2 (below h_base)
             level = self._aligned(level)
             t = self.t0 + self._tick * self.h_min
             if (level == 0 and self.long_levels and cap == math.inf
-                    and not any(self._active(lv) for lv in self.levels)):
+                    and not any(self._now_active)):
                 level = self._long_level(t)
             n_ticks = 1 << (self.max_halvings - level)
             end_tick = min(self._tick + n_ticks, self._end_tick)
@@ -404,7 +412,6 @@ class Adaptive(CouplingStrategy):
                                                           for s, h_keep in closures)
             if risky and saved is None:
                 saved = self._save()
-            start = [lv.kinematics(system.y) for lv in self.levels]
             self._before(t_next)
             self._advance(t, h)
             retry = self._retry_step(start, h)
@@ -466,8 +473,8 @@ class Adaptive(CouplingStrategy):
         system, y, dormancy = self.system, self.system.y, self._dormancy
         t1 = t + h
         pending = []
-        for k, (lv, node) in enumerate(zip(self.levels, system.contacts)):
-            if self._active(lv):
+        for k, (active, node) in enumerate(zip(self._now_active, system.contacts)):
+            if active:
                 dormancy.wake(node)
                 node.step(y, t, h)
             else:
