@@ -20,7 +20,7 @@ from the buildings at t, buildings), of a length chosen per step:
 * *Quiet*: where every gap is proven open (:mod:`cosim.master.gap_bound`) for the step and one
   base step more, aligned steps of up to ``max_long_step`` (0.32 s): the buildings integrate
   the record's knots exactly across them (:mod:`cosim.master.knots`), the contacts sleep
-  through them (:mod:`cosim.master.dormancy`).  Default scene: 692 steps instead of 4012.
+  through them (:mod:`cosim.master.dormancy`).  Default scene: 543 steps instead of 4012.
 * *In contact* (and for the step that closes the gap) the step is at most
   ``contact_fraction * T`` with ``T = L / v`` the impact's time scale,
   ``L = (m v^2 / k)^(1/(n+1))`` (:meth:`~fmu_src.contact_laws.ContactLaw.length_scale`),
