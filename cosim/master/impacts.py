@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.integrate import solve_ivp
+
 from fmu_src.linear_response import Configuration
 from fmu_src.plain_contact import PlainContact
 from fmu_src.resolver import ImpactResolver
@@ -134,7 +136,7 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
     building from its state at the step start, under the ground acceleration it was given (held
     or the record's knots), the contact force inside the step (linear between the trajectory's
     points) and the other contacts' held forces (:func:`_exact_in_step`: the closed-form
-    response to inputs linear between knots).  Sign -1 on
+    response to inputs linear between knots; ``solve_ivp`` for an undamped free mass).  Sign -1 on
     the left body, +1 on the right.  Yielding buildings keep the quick estimate.  A plain-law
     contact's force is held over each step, as the building holds it: its building's own
     in-step peak has it already.
@@ -182,11 +184,12 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
                 # the exact in-step values replace the estimate (which overshoots by up to 1.5 %:
                 # the structure's part is not linear over a step that holds an impact)
                 if building not in models:
-                    models[building] = shear_building(spec)
-                    models[building] = (models[building], elastic_configuration(models[building]))
+                    model = shear_building(spec)
+                    models[building] = (model, elastic_configuration(model))
                 model, config = models[building]
-                value = max(_exact_in_step(windows, model, building, floor, int(k), force_t, force,
-                                           sign, float(mine[k]), held[building][k], config)
+                solve = _exact_in_step if config is not None else _integrated_in_step
+                value = max(solve(windows, model, building, floor, int(k), force_t, force,
+                                  sign, float(mine[k]), held[building][k], config)
                             for k in np.unique(r[quick >= (1.0 - _CANDIDATE_MARGIN) * value]))
             floors = out.setdefault(building, {})
             floors[floor] = max(floors.get(floor, 0.0), value)
@@ -282,6 +285,47 @@ def _exact_in_step(windows, model, building: str, floor: int, k: int, force_t: n
     return best
 
 
-def elastic_configuration(model) -> Configuration:
-    """The exact linear response of a shear building (:class:`fmu_src.linear_response.Configuration`)."""
-    return Configuration(model.masses, model.C, model.stiffnesses)
+def elastic_configuration(model) -> Configuration | None:
+    """The exact linear response of a shear building (:class:`fmu_src.linear_response.Configuration`),
+    None where its modal form is refused (a defective state matrix: an undamped free mass)."""
+    try:
+        return Configuration(model.masses, model.C, model.stiffnesses)
+    except ValueError:
+        return None
+
+
+def _integrated_in_step(windows, model, building: str, floor: int, k: int, force_t: np.ndarray, force: np.ndarray,
+                        sign: float, mine_held: float, f_held: np.ndarray, config=None) -> float:
+    """:func:`_exact_in_step` by ``solve_ivp`` (DOP853, rtol 1e-10) where the closed form is
+    refused (:func:`elastic_configuration`)."""
+    t0, t1 = float(windows.t0[k]), float(windows.t1[k])
+    n = model.n
+    floors = range(1, n + 1)
+    u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
+    v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
+    g_times, g_values = windows.inputs[building].ground(k, t0, t1)
+    inside = (force_t > t0) & (force_t < t1)
+    tp = force_t[inside]
+    knots_t = np.concatenate(([t0], tp, [t1]))
+    knots_f = np.concatenate(([np.interp(t0, force_t, force, 0.0, 0.0)], force[inside],
+                              [np.interp(t1, force_t, force, 0.0, 0.0)]))
+    K, C, minv = model.K, model.C, 1.0 / model.masses
+    base = f_held.copy()
+    base[floor - 1] -= sign * mine_held
+
+    def forces(tt):
+        f = base.copy()
+        f[floor - 1] += sign * float(np.interp(tt, knots_t, knots_f))
+        return f
+
+    def rhs(tt, y):
+        u, v = y[:n], y[n:]
+        return np.concatenate((v, minv * (-(K @ u) - C @ v + forces(tt)) - float(np.interp(tt, g_times, g_values))))
+
+    sol = solve_ivp(rhs, (t0, t1), np.concatenate((u0, v0)), method="DOP853", rtol=1e-10, atol=1e-14,
+                    dense_output=True)
+    grid = np.unique(np.concatenate((np.linspace(t0, t1, _STEP_POINTS), tp)))
+    y = sol.sol(grid)
+    acc = [abs((-(K[floor - 1] @ y[:n, j]) - C[floor - 1] @ y[n:, j] + forces(grid[j])[floor - 1]) * minv[floor - 1])
+           for j in range(grid.size)]
+    return float(max(acc))
