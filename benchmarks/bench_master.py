@@ -4,9 +4,11 @@
 
 For each scene: the first and the best of ``repeat`` runs of the simulation loop (FMUs
 loaded and instantiated once, ``System.reset`` between runs, nothing written), the cost
-per communication step and the FMI calls.  ``--profile`` also profiles one run of the
-default scene and prints the share of the time spent in ``cosim/`` itself (cProfile
-inflates Python-heavy code, so this over-estimates the master's share).
+per communication step and the FMI calls.  ``--profile`` also profiles one more run of every
+scene and prints the time spent in ``cosim/`` itself (own time of its functions: the
+master's bookkeeping; the FMUs' Python and the FMI calls excluded), in total and per step
+(cProfile inflates Python-heavy code, so this over-estimates the master's share: compare
+trees with it, not with the wall times).
 """
 from __future__ import annotations
 
@@ -24,14 +26,14 @@ from cosim.master.simulate import simulate
 from cosim.master.system import Catalog, System  # noqa: E402
 from cosim.master.loader import load_scene  # noqa: E402
 
-SCENES = ("default", "single_impact", "free_vibration", "one_building", "kasai_maison")
+SCENES = ("default", "single_impact", "free_vibration", "one_building", "kasai_maison", "default_inelastic")
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fmu-dir", type=Path)
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--profile", action="store_true", help="profile the default scene")
+    parser.add_argument("--profile", action="store_true", help="profile every scene: the master's own time per step")
     args = parser.parse_args(argv)
     if args.fmu_dir is None:
         from cosim.fmus import default_fmu_dir
@@ -50,7 +52,7 @@ def main(argv=None) -> int:
                 n = result.cost.communication_steps
                 print(f"{name:<16}{n:>7}{len(system.nodes):>10}{times[0]:>13.3f}{best:>9.3f}"
                       f"{1e6 * best / n:>9.1f}{result.cost.fmu_calls:>11}")
-                if args.profile and name == "default":
+                if args.profile:
                     profiler = cProfile.Profile()
                     profiler.enable()
                     simulate(system, progress=False)
@@ -58,8 +60,8 @@ def main(argv=None) -> int:
                     stats = pstats.Stats(profiler)
                     total = stats.total_tt
                     master = sum(v[2] for k, v in stats.stats.items() if "/cosim/" in k[0])
-                    print(f"  profile of default: {total:.3f} s in total, {master:.3f} s "
-                          f"({100 * master / total:.0f} %) in cosim/ itself (own time)")
+                    print(f"  profile of {name}: {total:.3f} s in total, {master:.3f} s "
+                          f"({100 * master / total:.0f} %, {1e6 * master / n:.0f} us/step) in cosim/ itself (own time)")
     return 0
 
 

@@ -219,3 +219,23 @@ def test_guard_flags_non_finite_and_energy(catalog):
         k = system.columns.index("pounding_3.delta")
         system.y[k] = 1.0      # a metre of concrete penetration
         assert guard.problem(0.1, 0.01).reason == "penetration"
+
+
+@pytest.mark.parametrize("t, level", [(2.20, -2), (2.22, -1)])
+def test_a_proof_that_ends_where_the_step_needs_it_allows_it(monkeypatch, t, level):
+    """A proof made at 2.17 s for 0.08 s covers [2.20, 2.24] + one base step, and [2.22, 2.24] +
+    one: the long-step choice takes those steps (40 ms, 20 ms), although the proof's end time,
+    a sum of floats, lies a hair short of where they need it (round-off: the steps were halved
+    twice on the default scene, 692 steps instead of 543).  Without the slack it refuses them."""
+    from cosim.master.coupling import adaptive
+
+    strategy = Adaptive.__new__(Adaptive)
+    strategy.h_max, strategy.max_halvings, strategy.long_levels = 0.01, 16, 5
+    strategy.h_min = strategy.h_max / 2 ** strategy.max_halvings
+    strategy.t0, strategy.t_bound, strategy._look = 0.0, 40.0, None
+    strategy._tick = round(t / strategy.h_min)
+    strategy._proven = [2.17 + 0.08]
+    strategy._prove_quiet = lambda t, H: pytest.fail("no new proof is needed")
+    assert strategy._long_level(t) == level
+    monkeypatch.setattr(adaptive, "PROOF_SLACK", 0.0)
+    assert strategy._long_level(t) > level

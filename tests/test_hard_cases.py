@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from cosim.master.guard import InstabilityError
+from cosim.master.results import summarize
 from cosim.master.simulate import simulate
 from cosim.master.system import System
 from cosim.peers.reference import reference_for_scene
@@ -265,9 +266,11 @@ def test_strongest_record_at_2g(catalog, resolve):
     assert result["pounding_3.impacts"][-1] == ref.impacts
     assert result["pounding_3.F_max"][-1] == pytest.approx(ref.peak_force_N, rel=0.01)
     assert dissipated == pytest.approx(ref.dissipated_energy_J, rel=0.02)
+    summary = summarize(result)
     for b, peak in zip(loaded.buildings, ref.peak_displacements):
-        n = loaded.n_storeys(b.name)
-        u = max(np.max(np.abs(result[f"{b.name}.x[{i}]"])) for i in range(1, n + 1))
+        # the peak the package reports: located inside the steps (the step ends alone miss it
+        # between long steps: 1.9 % low here with 10 ms steps near and 0.32 s steps away from contact)
+        u = summary.buildings[b.name].peak_displacement_m
         assert u == pytest.approx(float(np.max(peak)), rel=0.005)
 
 
@@ -295,8 +298,9 @@ def test_twenty_storeys_pounding_at_every_floor(catalog, resolve):
     peak = max(float(result[f"{c.name}.F_max"][-1]) for c in loaded.contacts)
     assert peak == pytest.approx(ref.peak_force_N, rel=0.01)
     assert dissipated == pytest.approx(float(ref.energies.contact_dissipated[-1]), rel=0.02)
+    summary = summarize(result)
     for b, peak_u in zip(loaded.buildings, ref.peak_displacements):
-        u = max(np.max(np.abs(result[f"{b.name}.x[{i}]"])) for i in range(1, n + 1))
+        u = summary.buildings[b.name].peak_displacement_m     # located inside the steps, as reported
         assert u == pytest.approx(float(np.max(peak_u)), rel=0.005)
 
 

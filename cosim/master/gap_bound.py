@@ -57,6 +57,12 @@ GRID = 64
 #: at ``|d - s| = dy`` to round-off (~1e-16 dy: the master reads ``s`` through ``drift_residual``),
 #: which this margin refuses; it costs 1e-6 of the elastic range
 ELASTIC_MARGIN = 1e-6
+#: a storey is taken as yielding now, without a proof, when its drift lies this fraction of its yield
+#: drift beyond the elastic range (a yielding storey lies ELASTIC_MARGIN beyond it; the drift's
+#: round-off, ~1e-15 of the floor displacements, is far below 1e-9 of a yield drift)
+YIELDING_SLACK = 1e-9
+#: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
+_POINTS = np.arange(GRID + 1, dtype=float)
 
 
 class ModalBound:
@@ -78,18 +84,30 @@ class ModalBound:
         c = np.diag(modal_c)
         with np.errstate(divide="ignore", invalid="ignore"):
             self.zeta = np.where(w > 0.0, c / (2.0 * np.where(w > 0.0, w, 1.0)), 0.0)
+        self.zeta_w = self.zeta * self.w
         self.drift_phi = phi.copy()                # storey drifts d = D u: D Phi
         self.drift_phi[1:] -= phi[:-1]
+        self.abs_phi = np.abs(phi)
+        self.abs_drift_phi = np.abs(self.drift_phi)
+        self.rows = np.vstack((phi, self.drift_phi))     # floors then storey drifts, in one product
+        self.abs_rows = np.abs(self.rows)
         self._tables: dict[float, tuple[np.ndarray, ...]] = {}
 
     # -- the free motion and the forced bound on a grid of s = H k / GRID ------------------------------
     def tables(self, H: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(s, Ac, As, G)`` on ``s_k = H k / GRID``: ``q_free = Ac q0 + As (q0' + zeta w q0)``
         (modes x points) and ``G_j(s_k)`` (modes x points); cached per ``H``."""
+        return self._cached(H)[:4]
+
+    def _cached(self, H: float) -> tuple[np.ndarray, ...]:
+        """:meth:`tables` and, per ``H``, what the forced bound of a unit ground acceleration is
+        on every floor, ``sum_j |Phi_fj Gamma_j| G_j(s_k)`` (floors x points), and on every
+        floor then every storey drift (:attr:`rows`): a proof scales them by its ground bound
+        (a run's proofs use a few horizons only: computed once per horizon, not per proof)."""
         cached = self._tables.get(H)
         if cached is not None:
             return cached
-        s = H * np.arange(GRID + 1) / GRID
+        s = H * _POINTS / GRID
         Ac = np.ones((self.n, s.size))
         As = np.tile(s, (self.n, 1))
         for j in range(self.n):
@@ -115,7 +133,8 @@ class ModalBound:
                 G[j] = np.where(s <= knee, 0.5 * s * s, 0.5 * knee * knee + (s - knee) * knee)
         if len(self._tables) > 64:                # a bounded number of distinct step lengths
             self._tables.pop(next(iter(self._tables)))
-        out = self._tables[H] = (s, Ac, As, G)
+        gamma = np.abs(self.gamma)
+        out = self._tables[H] = (s, Ac, As, G, (self.abs_phi * gamma) @ G, (self.abs_rows * gamma) @ G)
         return out
 
     def free_motion(self, u: np.ndarray, v: np.ndarray, H: float) -> tuple[np.ndarray, np.ndarray]:
@@ -125,12 +144,15 @@ class ModalBound:
         q = self.to_modal @ u
         qd = self.to_modal @ v
         _, Ac, As, _ = self.tables(H)
-        Q = Ac * q[:, None] + As * (qd + self.zeta * self.w * q)[:, None]
+        Q = Ac * q[:, None] + As * (qd + self.zeta_w * q)[:, None]
         return Q, np.sqrt((self.w * q) ** 2 + qd * qd)
 
 
 class FloorMotion:
-    """One building's motion over a horizon ``H``, as the contact levels ask for it."""
+    """One building's motion over a horizon ``H``, as the contact levels ask for it.
+
+    Every floor (and, about a static ``shift``, every storey drift) is computed at once, on
+    first use: one matrix product per part instead of one per floor and level."""
 
     def __init__(self, bound: ModalBound, u: np.ndarray, v: np.ndarray, H: float,
                  ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None):
@@ -140,32 +162,55 @@ class FloorMotion:
         self.bound = bound
         self.shift = shift
         self.Q, self.speed = bound.free_motion(u if shift is None else u - shift, v, H)
-        _, _, _, G = bound.tables(H)
-        self.G = G
+        cached = bound._cached(H)
+        self.G = cached[3]
         self.ground = ground_bound
+        # the rows computed: the floors, and the storey drifts about a shift
+        if shift is None:
+            self._rows, self._abs_rows, self._rows_ground = bound.phi, bound.abs_phi, cached[4]
+        else:
+            self._rows, self._abs_rows, self._rows_ground = bound.rows, bound.abs_rows, cached[5]
         self.modal_force = np.abs(bound.phi.T @ force) if force is not None and np.any(force) else None
+        self._all = self._floors = None
+
+    def _rows_motion(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._all is None:
+            free = self._rows @ self.Q
+            forced = self._rows_ground * self.ground
+            if self.modal_force is not None:
+                forced = forced + (self._abs_rows * self.modal_force) @ self.G
+            self._all = (free, forced, self._abs_rows @ self.speed)
+        return self._all
+
+    def floors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every floor: free displacement on the grid (m, floors x points), forced bound on the
+        grid (m, increasing) and the bound on the free rate (m/s, per floor)."""
+        if self._floors is None:
+            free, forced, rate = self._rows_motion()
+            n = self.bound.n
+            self._floors = (free, forced, rate) if self.shift is None else \
+                (free[:n] + self.shift[:, None], forced[:n], rate[:n])
+        return self._floors
 
     def floor(self, f: int) -> tuple[np.ndarray, np.ndarray, float]:
         """Floor ``f`` (0-based): free displacement on the grid (m), forced bound on the grid (m,
         increasing) and the bound on the free rate (m/s)."""
-        row = self.bound.phi[f]
-        a = np.abs(row)
-        forced = (a * np.abs(self.bound.gamma)) @ self.G * self.ground
-        if self.modal_force is not None:
-            forced = forced + (a * self.modal_force) @ self.G
-        free = row @ self.Q
-        return (free if self.shift is None else free + self.shift[f]), forced, float(a @ self.speed)
+        free, forced, rate = self.floors()
+        return free[f], forced[f], float(rate[f])
 
     def drifts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every storey's drift about the static shift, ``D w`` (module docstring): free part on the
         grid (m, storeys x points), forced bound on the grid (m, increasing) and the bound on the
         free rate (m/s, per storey)."""
-        rows = self.bound.drift_phi
-        a = np.abs(rows)
-        forced = (a * np.abs(self.bound.gamma)) @ self.G * self.ground
+        n = self.bound.n
+        if self.shift is not None:
+            free, forced, rate = self._rows_motion()
+            return free[n:], forced[n:], rate[n:]
+        bound = self.bound
+        forced = (bound.abs_drift_phi * np.abs(bound.gamma)) @ self.G * self.ground
         if self.modal_force is not None:
-            forced = forced + (a * self.modal_force) @ self.G
-        return rows @ self.Q, forced, a @ self.speed
+            forced = forced + (bound.abs_drift_phi * self.modal_force) @ self.G
+        return bound.drift_phi @ self.Q, forced, bound.abs_drift_phi @ self.speed
 
 
 def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
@@ -190,14 +235,15 @@ def band_horizon(free: np.ndarray, forced: np.ndarray, rate: np.ndarray, lo: np.
     inside ``(lo, hi)``, from :meth:`FloorMotion.drifts` (rows x points, per row) and the
     bounds ``lo``, ``hi`` per row (0 if a row is not inside now)."""
     x0 = free[:, 0]
-    if not (np.all(x0 > lo) and np.all(x0 < hi)):
+    if not ((x0 > lo).all() and (x0 < hi).all()):
         return 0.0
     dS = H / GRID
     # interval k: the free part within its rate bound of the chord's mean, the forced at its end
     mid = 0.5 * (free[:, :-1] + free[:, 1:])
     slack = 0.5 * dS * rate[:, None] + forced[:, 1:]
-    bad = np.flatnonzero(((mid + slack >= hi[:, None]) | (mid - slack <= lo[:, None])).any(axis=0))
-    return H if bad.size == 0 else float(bad[0]) * dS
+    bad = ((mid + slack >= hi[:, None]) | (mid - slack <= lo[:, None])).any(axis=0)
+    first = int(bad.argmax())
+    return float(first) * dS if bad[first] else H
 
 
 class ElasticRange:
@@ -207,6 +253,7 @@ class ElasticRange:
     def __init__(self, alpha: float, yield_drift: np.ndarray, residual: np.ndarray):
         self.alpha = float(alpha)
         self.half_width = (1.0 - ELASTIC_MARGIN) * np.asarray(yield_drift, dtype=float)
+        self.slack = YIELDING_SLACK * np.asarray(yield_drift, dtype=float)
         self.residual = residual
 
     def shift(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -214,6 +261,16 @@ class ElasticRange:
         linear (m) and the centre of each storey's elastic range in ``D w`` (m)."""
         r = y[self.residual]
         return np.cumsum(r), self.alpha / (1.0 - self.alpha) * r
+
+    def yielding(self, w: np.ndarray, centre: np.ndarray) -> bool:
+        """A storey yields now, beyond doubt: its drift about the shift, from the floors' ``w =
+        u - u_s`` (m), lies outside its elastic range by more than :data:`YIELDING_SLACK` of the
+        yield drift.  :meth:`horizon` would then say 0 (its drifts come through the modes, which
+        differ from ``D w`` by round-off, ~1e-15 of the displacements); checked first, because
+        a yielding building is proven again at every step and fails at once."""
+        d = w.copy()
+        d[1:] -= w[:-1]
+        return bool((np.abs(d - centre) >= self.half_width + self.slack).any())
 
     def horizon(self, motion: FloorMotion, centre: np.ndarray, H: float) -> float:
         """Longest ``s <= H`` (s) over which every storey provably stays elastic."""
@@ -224,9 +281,9 @@ class ElasticRange:
 def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
     """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
     must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
-    s = t0 + H * np.arange(GRID + 1) / GRID
+    s = t0 + H * _POINTS / GRID
     out = np.maximum.accumulate(np.abs(np.interp(s, times, values)))
-    lo, hi = np.searchsorted(times, (t0, t0 + H), side="left")
+    lo = np.searchsorted(times, t0, side="left")
     hi = np.searchsorted(times, t0 + H, side="right")
     if hi > lo:
         # a knot's value counts from the first grid point at or after it: the largest |value|
@@ -267,6 +324,7 @@ class OpenGaps:
         self.buildings = buildings          # name -> (ModalBound, x index array, v index array)
         self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
         self.elastic = elastic or {}        # name -> ElasticRange, for the bilinear buildings
+        self._all_pairs = None
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
@@ -306,27 +364,82 @@ class OpenGaps:
         out = [system.columns[i] for _, x, v in self.buildings.values() for i in np.concatenate((x, v))]
         return out + [system.columns[i] for e in self.elastic.values() for i in e.residual]
 
+    def _pairs(self, which: Sequence[int] | None) -> list[tuple[str, str, list[int], np.ndarray, np.ndarray, np.ndarray]]:
+        """The levels (or those in ``which``) grouped by their two buildings: ``(left, right,
+        positions in the answer, left floors, right floors, gaps)``; all levels' grouping once."""
+        if which is None and self._all_pairs is not None:
+            return self._all_pairs
+        groups: dict = {}
+        for pos, k in enumerate(range(len(self.levels)) if which is None else which):
+            left, fl, right, fr, gap = self.levels[k]
+            g = groups.setdefault((left, right), ([], [], [], []))
+            g[0].append(pos)
+            g[1].append(fl)
+            g[2].append(fr)
+            g[3].append(gap)
+        pairs = [(left, right, pos, np.array(fl, dtype=np.intp), np.array(fr, dtype=np.intp), np.array(gap, dtype=float))
+                 for (left, right), (pos, fl, fr, gap) in groups.items()]
+        if which is None:
+            self._all_pairs = pairs
+        return pairs
+
     def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
                  which: Sequence[int] | None = None) -> list[float]:
         """For each contact level (or those in ``which``): how long (s, <= ``H``) its gap provably
         stays open from now, with ``ground[k]`` bounding ``|ag|`` up to grid point ``k`` and
-        ``forces`` (building -> force per floor, N) held over the horizon."""
+        ``forces`` (building -> force per floor, N) held over the horizon.  ``ground`` may be
+        a function that returns it: called once, only if a building's motion is needed (a
+        yielding building ends the proof before).
+
+        The levels between the same two buildings are proven together (one array operation
+        each, as :func:`open_horizon` does for one level, with the same arithmetic)."""
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
-        out = []
-        for k in (range(len(self.levels)) if which is None else which):
-            left, fl, right, fr, gap = self.levels[k]
-            for b in (left, right):
-                if b not in motions:
-                    bound, ix, iv = self.buildings[b]
-                    elastic = self.elastic.get(b)
-                    if elastic is None:
-                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, (forces or {}).get(b))
-                        linear[b] = H
+        forces = forces or {}
+        lazy = [ground] if callable(ground) else None
+
+        def ground_bound():
+            if lazy is None:
+                return ground
+            if callable(lazy[0]):
+                lazy[0] = lazy[0]()
+            return lazy[0]
+
+        def linear_for(b):
+            s = linear.get(b)
+            if s is None:
+                bound, ix, iv = self.buildings[b]
+                elastic = self.elastic.get(b)
+                if elastic is None:
+                    motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b))
+                    s = linear[b] = H
+                else:
+                    shift, centre = elastic.shift(y)
+                    if elastic.yielding(y[ix] - shift, centre):
+                        s = linear[b] = 0.0         # no proof: base steps
                     else:
-                        shift, centre = elastic.shift(y)
-                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, (forces or {}).get(b), shift)
-                        linear[b] = elastic.horizon(motions[b], centre, H)
-            s = min(linear[left], linear[right])
-            out.append(0.0 if s == 0.0 else min(s, open_horizon(motions[left].floor(fl), motions[right].floor(fr), gap, H)))
+                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b), shift)
+                        s = linear[b] = elastic.horizon(motions[b], centre, H)
+            return s
+
+        pairs = self._pairs(which)
+        out = [0.0] * sum(len(p[2]) for p in pairs)
+        dS = H / GRID
+        for left, right, positions, fl, fr, gap in pairs:
+            s = linear_for(left)
+            if s == 0.0 or (s := min(s, linear_for(right))) == 0.0:
+                continue
+            xl, bl, ll = motions[left].floors()
+            xr, br, lr = motions[right].floors()
+            delta = xl[fl] - xr[fr] - gap[:, None]
+            # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
+            upper = (0.5 * (delta[:, :-1] + delta[:, 1:]) + (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
+                     + bl[fl, 1:] + br[fr, 1:])
+            bad = upper >= 0.0
+            first = bad.argmax(axis=1)
+            closed = delta[:, 0] >= 0.0
+            for i, pos in enumerate(positions):
+                if closed[i]:
+                    continue
+                out[pos] = min(s, float(first[i]) * dS if bad[i, first[i]] else H)
         return out

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from fmu_src.linear_response import Configuration
 from fmu_src.plain_contact import PlainContact
 from fmu_src.resolver import ImpactResolver
 
@@ -135,7 +136,8 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
     within ``_CANDIDATE_MARGIN`` of the floor's largest are then solved exactly: the linear
     building from its state at the step start, under the ground acceleration it was given (held
     or the record's knots), the contact force inside the step (linear between the trajectory's
-    points) and the other contacts' held forces (``solve_ivp``, DOP853, rtol 1e-10).  Sign -1 on
+    points) and the other contacts' held forces (:func:`_exact_in_step`: the closed-form
+    response to inputs linear between knots; ``solve_ivp`` for an undamped free mass).  Sign -1 on
     the left body, +1 on the right.  Yielding buildings keep the quick estimate.  A plain-law
     contact's force is held over each step, as the building holds it: its building's own
     in-step peak has it already.
@@ -155,6 +157,7 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
         before[building] = np.zeros_like(held[building])
         before[building][follows] = held[building][follows - 1]
     out: dict[str, dict[int, float]] = {}
+    models: dict = {}            # building -> (ShearBuilding, its exact linear response)
     for level in scene.levels:
         if not bool(scene.instance(level.instance).value("resolve_impacts")):
             continue
@@ -181,9 +184,13 @@ def contact_floor_accelerations(result: "SimulationResult") -> dict[str, dict[in
             if _is_linear(spec):
                 # the exact in-step values replace the estimate (which overshoots by up to 1.5 %:
                 # the structure's part is not linear over a step that holds an impact)
-                model = shear_building(spec)
-                value = max(_exact_in_step(windows, model, building, floor, int(k), force_t, force,
-                                           sign, float(mine[k]), held[building][k])
+                if building not in models:
+                    model = shear_building(spec)
+                    models[building] = (model, elastic_configuration(model))
+                model, config = models[building]
+                solve = _exact_in_step if config is not None else _integrated_in_step
+                value = max(solve(windows, model, building, floor, int(k), force_t, force,
+                                  sign, float(mine[k]), held[building][k], config)
                             for k in np.unique(r[quick >= (1.0 - _CANDIDATE_MARGIN) * value]))
             floors = out.setdefault(building, {})
             floors[floor] = max(floors.get(floor, 0.0), value)
@@ -216,19 +223,88 @@ def _force_polyline(trajectories: list[ContactTrajectory]) -> tuple[np.ndarray, 
 
 
 def _exact_in_step(windows, model, building: str, floor: int, k: int, force_t: np.ndarray, force: np.ndarray,
-                   sign: float, mine_held: float, f_held: np.ndarray) -> float:
+                   sign: float, mine_held: float, f_held: np.ndarray, config: Configuration | None = None) -> float:
     """Largest |absolute acceleration| of ``floor`` over the logged step ``k``: the linear
     building from its state at the step start, the contact force (sign ``sign`` on this floor)
     along its polyline (force_t, force) in place of its held mean ``mine_held`` (N), the other
-    held forces ``f_held`` (N per floor), the ground acceleration the building was given."""
+    held forces ``f_held`` (N per floor), the ground acceleration the building was given.
+
+    Exact to round-off: between consecutive knots of the two polylines both inputs are linear
+    in time, and the building's response to a linear input is known in closed form
+    (:class:`fmu_src.linear_response.Configuration`: ``z' = A z + b0 + b1 s`` in modal
+    coordinates, ``config`` the building's elastic one, built here if not given); evaluated at
+    ``_STEP_POINTS`` points of the step and at every knot."""
     t0, t1 = float(windows.t0[k]), float(windows.t1[k])
     n = model.n
+    if config is None:
+        config = elastic_configuration(model)
     floors = range(1, n + 1)
     u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
     v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
     g_times, g_values = windows.inputs[building].ground(k, t0, t1)
     # the contact's force inside the step: its polyline, cut at the step's ends (a point on an
     # end belongs to both steps)
+    inside = (force_t > t0) & (force_t < t1)
+    tp = force_t[inside]
+    knots_t = np.concatenate(([t0], tp, [t1]))
+    knots_f = np.concatenate(([np.interp(t0, force_t, force, 0.0, 0.0)], force[inside],
+                              [np.interp(t1, force_t, force, 0.0, 0.0)]))
+    minv = 1.0 / model.masses
+    base = f_held.copy()
+    base[floor - 1] -= sign * mine_held
+    f = floor - 1
+    # segments between every knot of either input; each input is linear inside a segment, read at
+    # two inner points (a knot shared by a jump of the record is then taken from the right side)
+    cuts = np.unique(np.concatenate((knots_t, g_times[(g_times > t0) & (g_times < t1)])))
+    grid = np.unique(np.concatenate((np.linspace(t0, t1, _STEP_POINTS), tp, cuts)))
+    z = np.concatenate((u0, v0))
+    row_u, row_v = -model.K[f] * minv[f], -model.C[f] * minv[f]
+    best = 0.0
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        length = b - a
+        if not length > 0.0:
+            continue
+        inner = (a + length / 3.0, a + 2.0 * length / 3.0)
+        g1, g2 = np.interp(inner, g_times, g_values)
+        c1, c2 = np.interp(inner, knots_t, knots_f)
+        g_slope, c_slope = 3.0 * (g2 - g1) / length, 3.0 * (c2 - c1) / length
+        g_a, c_a = g1 - g_slope * length / 3.0, c1 - c_slope * length / 3.0
+        # z' = A z + b0 + b1 s: the floor forces (the contact's linear, the others held) and -ag
+        p0 = base.copy()
+        p0[f] += sign * c_a
+        b0 = np.concatenate((np.zeros(n), minv * p0 - g_a))
+        b1 = np.zeros(2 * n)
+        b1[n:] = -g_slope
+        b1[n + f] += minv[f] * sign * c_slope
+        q0, beta0, beta1 = config.W @ z, config.W @ b0, config.W @ b1
+        s = grid[(grid >= a) & (grid <= b)] - a
+        states = config.state_at(q0, beta0, beta1, s)
+        # absolute acceleration of the floor: (-(K u) - C v + forces) / m
+        acc = row_u @ states[:n] + row_v @ states[n:] + minv[f] * (p0[f] + sign * c_slope * s)
+        best = max(best, float(np.max(np.abs(acc))))
+        z = config.state_at(q0, beta0, beta1, length)
+    return best
+
+
+def elastic_configuration(model) -> Configuration | None:
+    """The exact linear response of a shear building (:class:`fmu_src.linear_response.Configuration`),
+    None where its modal form is refused (a defective state matrix: an undamped free mass)."""
+    try:
+        return Configuration(model.masses, model.C, model.stiffnesses)
+    except ValueError:
+        return None
+
+
+def _integrated_in_step(windows, model, building: str, floor: int, k: int, force_t: np.ndarray, force: np.ndarray,
+                        sign: float, mine_held: float, f_held: np.ndarray, config=None) -> float:
+    """:func:`_exact_in_step` by ``solve_ivp`` (DOP853, rtol 1e-10) where the closed form is
+    refused (:func:`elastic_configuration`)."""
+    t0, t1 = float(windows.t0[k]), float(windows.t1[k])
+    n = model.n
+    floors = range(1, n + 1)
+    u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
+    v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
+    g_times, g_values = windows.inputs[building].ground(k, t0, t1)
     inside = (force_t > t0) & (force_t < t1)
     tp = force_t[inside]
     knots_t = np.concatenate(([t0], tp, [t1]))
