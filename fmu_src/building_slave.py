@@ -41,11 +41,13 @@ import numpy as np
 from .building_response import StepCost, integrator_for
 from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
 from .hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
+from .linear_response import canonical_length
 from .record_knots import KNOT_CAPACITY
 from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
-_MAX_CACHED_STEPS = 64
+_MAX_CACHED_STEPS = 64          # step matrices by canonical step length
+_MAX_STEP_ALIASES = 256         # exact step lengths remembered to their canonical one
 # Parameter bounds: generous beyond any building (a storey of the tallest tower is ~1e7 kg and
 # 1e10 N/m, periods stay below 10 s), and tight enough that the eigenproblem and the matrix
 # exponential stay in double precision: m = 1e-300 kg made LAPACK fail, m = 1e300 kg and
@@ -156,7 +158,10 @@ class Building(Fmi2Slave):
         self._real_inputs = []
         self._building: ShearBuilding | None = None
         self._integrator = None
+        # zero-order-hold step matrices by canonical step length (linear_response.canonical_length:
+        # a host's t_next - t repeats a length only to round-off), and by every exact length seen
         self._steps: dict[float, tuple[np.ndarray, np.ndarray | None]] = {}
+        self._step_aliases: dict[float, tuple[np.ndarray, np.ndarray | None]] = {}
         self.cost = StepCost()   # cost counters since initialisation (not part of the FMU state)
 
     # -- derived outputs, computed when read -------------------------------------------------------
@@ -239,6 +244,7 @@ class Building(Fmi2Slave):
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
         self._steps = {}
+        self._step_aliases = {}
         for out in (self.x, self.v, self.a, self.drift, self.drift_residual):
             out[:] = 0.0
         self._publish(self.F[:n])
@@ -266,7 +272,19 @@ class Building(Fmi2Slave):
         self._derived_cache = None
 
     # -- stepping ----------------------------------------------------------------------------
-    def _step_matrix(self, h: float):
+    def _step_entry(self, step_size: float):
+        """The step matrices of a step of ``step_size`` s: those of its canonical length, built
+        once (bit for bit those of ``step_size`` itself when the host repeats a decimal length)."""
+        key = canonical_length(step_size)
+        entry = self._steps.get(key)
+        if entry is None:
+            entry = self._step_matrix(key, step_size)
+        if len(self._step_aliases) >= _MAX_STEP_ALIASES:
+            self._step_aliases.clear()
+        self._step_aliases[step_size] = entry
+        return entry
+
+    def _step_matrix(self, h: float, asked: float | None = None):
         """``G`` with ``G @ y`` = [u1; v1; a1; drift1; du; m' du; Q y; sqrt(m) v1; sqrt(k) drift1],
         and the matrices of the in-step peak search (``ExactPiecewiseLinear.legacy_rows``).
 
@@ -288,7 +306,7 @@ class Building(Fmi2Slave):
             # the block exponential (and Van Loan's damping integral, which grows like
             # exp(2 zeta w h)) overflows: no step of this length can be computed
             fastest = float(np.max(b.omegas))
-            raise SlaveError(f"a step of h = {h!r} s is beyond what the building's arithmetic supports (its step "
+            raise SlaveError(f"a step of h = {asked if asked is not None else h!r} s is beyond what the building's arithmetic supports (its step "
                              f"matrix overflows; fastest mode {fastest:.3g} rad/s, zeta = {b.damping_ratio:g}); "
                              f"use a shorter step")
         peaks = None if self._free_mass else self._integrator.legacy_rows(h)
@@ -354,9 +372,9 @@ class Building(Fmi2Slave):
 
     def _linear_step(self, step_size: float) -> None:
         """The linear zero-order-hold step: one cached matrix, bit for bit as in earlier versions."""
-        entry = self._steps.get(step_size)
+        entry = self._step_aliases.get(step_size)
         if entry is None:
-            entry = self._step_matrix(step_size)
+            entry = self._step_entry(step_size)
         G, peaks = entry
         n = self._n
         ag = self.ag
