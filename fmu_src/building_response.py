@@ -76,6 +76,11 @@ BOUC_WEN_MAX_RK_STEPS = 20_000                  # per communication step
 _ROOT_BUDGET = 200          # evaluations per root search (bisection depth ~ 2^-100 of the segment)
 _HERMITE_SLOPE_GAIN = 4.0 / 27.0   # max |h10|, |h11| on [0, 1] (cubic Hermite basis), see _peaks
 _PREFILTER_FROM = 16        # candidate functions from which _peaks drops the clear ones at once
+# round-off margin of the Hermite bounds (relative to the sum of the magnitudes of the end
+# values and slopes): the floating-point Hermite test stays within 1e-12 of the exact range
+# (test_the_peak_prefilter_bound_dominates_the_hermite_test measures < 1e-14), and the bound's
+# own evaluation adds a few eps
+_HERMITE_MARGIN = 2e-12
 
 
 @dataclass
@@ -706,11 +711,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM):
             g0v = np.abs(G[:, 0] + self._watch_offset(accel_offset))
             g1v = np.abs(g1)
-            slopes = np.abs(G[:, 2]) + np.abs(G[:, 3])
+            s0v, s1v = np.abs(G[:, 2]), np.abs(G[:, 3])
+            slopes = s0v + s1v
             slopes *= length
             magnitude = g0v + g1v + slopes
             reach = np.maximum(g0v, g1v) + _HERMITE_SLOPE_GAIN * slopes + 1e-12 * magnitude + B[:, 0] * w4
-            keep = keep & ~(reach <= limits)
+            # and those whose slope provably keeps its sign, by the same bound on the slope's
+            # Hermite (the test below, _monotonic)
+            curvatures = np.abs(G[:, 4]) + np.abs(G[:, 5])
+            curvatures *= length
+            monotonic = np.minimum(s0v, s1v) - _HERMITE_SLOPE_GAIN * curvatures - _HERMITE_MARGIN * (
+                s0v + s1v + curvatures) - B[:, 1] * w4 > 0.0
+            monotonic &= G[:, 2] * G[:, 3] > 0.0
+            keep = keep & ~(reach <= limits) & ~monotonic
         candidates = keep.nonzero()[0].tolist()
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
@@ -727,9 +740,15 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             else:
                 g0 = g0 + 0.0
             if s0 * s1 > 0.0:
-                # a slope that provably keeps its sign puts the extremes at the ends
-                lo, hi = hermite_range_scalar(s0, s1, length * c0, length * c1)
+                # a slope that provably keeps its sign puts the extremes at the ends: first the
+                # bound of the slope's Hermite (as the prefilter's above, with its round-off
+                # margin: where it decides, the exact test decides the same), then the test
                 err = bounds[j][1] * w4
+                a0, a1 = abs(s0), abs(s1)
+                e = length * (abs(c0) + abs(c1))
+                if min(a0, a1) - _HERMITE_SLOPE_GAIN * e - _HERMITE_MARGIN * (a0 + a1 + e) - err > 0.0:
+                    continue
+                lo, hi = hermite_range_scalar(s0, s1, length * c0, length * c1)
                 if lo - err > 0.0 or hi + err < 0.0:
                     continue
             lo, hi = hermite_range_scalar(g0, ends[j], length * s0, length * s1)
