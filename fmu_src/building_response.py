@@ -64,7 +64,8 @@ PEAK_ATOL = (1e-12, 1e-12, 1e-9)   # |x| (m), |drift| (m), |a| (m/s^2)
 MAX_PENDING = 256           # deferred peak searches kept before they are run anyway
 MAX_EVENTS_PER_STEP = 10000  # a bound on yield/unloading events in one communication step
 MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
-MAX_CHAINS = 32             # cached interval chains (ExactPiecewiseLinear._chain) per building
+MAX_PLANS = 16              # segment maps with a batch plan (ExactPiecewiseLinear._batch_plan) per building
+MAX_CHAINS = 8              # interval counts with a chain (ExactPiecewiseLinear._chain) per plan
 # Bouc-Wen's work per communication step.  The span: the same bound as the exact integrator's
 # quadrature (MAX_CHUNKS chunks of CHUNK_RATE / |lambda|), |lambda| h <= 8192, about 1300 periods
 # of the fastest elastic mode; a longer step (h = 1e6 s ran for minutes) is refused before any
@@ -272,7 +273,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
         self._inv_m = 1.0 / self.masses
-        self._chains: dict[tuple[int, int], tuple] = {}
+        self._plans: dict[int, tuple] = {}
 
     # -- bilinear storey state -----------------------------------------------------------------
     def storey_shear(self, state):
@@ -389,22 +390,29 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             slope = (ag[idx + 1] - ag[idx]) / lengths[idx]
             positive = lengths[idx].tolist()
         count = len(positive)
-        maps = [cfg.segment_map(L) for L in positive]
-        first = maps[0]
+        first = cfg.segment_map(positive[0])
+        # one length (to round-off) for every interval: canonical_length is monotonic, so the
+        # shortest and the longest sharing a map means all do (every step of a run, measured)
+        shortest, longest = min(positive), max(positive)
+        uniform = cfg.segment_map(shortest) is first and cfg.segment_map(longest) is first
+        maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
         Y = np.empty((count, size))
         Y[:, two_n] = ag0
         Y[:, two_n + 1] = slope
         Y[:, two_n + 2:] = p
         Y[0, :n] = state.u
         Y[0, n:two_n] = state.v
-        if all(m is first for m in maps):
-            # one length: z_1 .. z_count in one product, x = [z0; p; ag_0, slope_0, ag_1, ...]
+        if uniform:
+            # z_1 .. z_count in one product, x = [z0; p; ag_0, slope_0, ag_1, ...]
             x = np.empty(3 * n + 2 * count)
             x[:two_n] = Y[0, :two_n]
             x[two_n:3 * n] = p
             x[3 * n::2] = ag0
             x[3 * n + 1::2] = slope
-            Z = (self._chain(first, count) @ x).reshape(count, two_n)
+            chain = self._batch_plan(first)[3].get(count)
+            if chain is None:
+                chain = self._chain(first, count)
+            Z = (chain @ x).reshape(count, two_n)
             Y[1:, :two_n] = Z[:-1]
             z = Z[-1]
             groups = {id(first): range(count)}
@@ -424,29 +432,36 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         peaks = state.peaks
         for js in groups.values():
             smap = maps[js[0]]
-            rows = 6 * n + smap.scan.shape[0]
+            _, tier1, forms, _ = self._batch_plan(smap)
             # the rows of the group, as a slice where they are consecutive (a view, not a copy)
             Yg = Y[js[0]:js[-1] + 1] if js[-1] - js[0] == len(js) - 1 else Y[js]
-            out = Yg @ smap.stacked.T
-            bound = np.abs(out[:, rows - 4 * n:rows]) @ smap.change.T
+            # per interval only what tier 1 needs (a product small enough for one BLAS thread:
+            # the whole stacked map of 32 intervals of 15 storeys went multithreaded, 10 ms a
+            # step on a loaded machine): the watched functions and drift rates at the start,
+            # and the modal amplitudes of z'(0)
+            out = Yg @ tier1.T
+            bound = np.abs(out[:, 4 * n:]) @ smap.change.T
             slopes = np.abs(Yg[:, two_n + 1])
             bound += slopes[:, None] * smap.ramp_change
             if inelastic:
                 # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
-                margin = np.where(elastic, self.dy - np.abs(out[:, 3 * n:4 * n] - state.slip) - bound[:, n:two_n],
-                                  state.mode * out[:, 5 * n:6 * n] - bound[:, 3 * n:])
+                margin = np.where(elastic, self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n],
+                                  state.mode * out[:, 3 * n:4 * n] - bound[:, 3 * n:])
                 if not margin.min() > 0.0:
                     return None
-            # both energy forms of every interval: y' Q y summed over the group's rows
-            e_damp_g, e_in_g = np.einsum("ij,ikj->k", Yg, out[:, rows:].reshape(len(js), 2, size)).tolist()
+            # both energy forms summed over the group's intervals: sum_j y_j' Q y_j = <Q, Y'Y>
+            e_damp_g, e_in_g = (forms @ (Yg.T @ Yg).ravel()).tolist()
             e_damp += e_damp_g
             e_in += e_in_g
             # against the peaks at the step start: a superset of what later intervals need; a
             # function cleared here cannot pass the peaks anywhere in the interval (tier 1 is
             # rigorous), so only the others are tested in _peaks
-            need = np.abs(out[:, two_n:5 * n] + watch_offset) + bound[:, :3 * n] > peaks
-            for i in need.any(axis=1).nonzero()[0].tolist():
-                flagged.append((js[i], out[i, 6 * n:rows], need[i]))
+            need = np.abs(out[:, :3 * n] + watch_offset) + bound[:, :3 * n] > peaks
+            rows = need.any(axis=1).nonzero()[0].tolist()
+            if rows:
+                scans = Yg[rows] @ smap.scan.T           # the Scan vectors of those intervals only
+                for i, scan_vector in zip(rows, scans):
+                    flagged.append((js[i], scan_vector, need[i]))
         cost.segments = count
         cost.cleared = count - len(flagged)
         if flagged:
@@ -468,16 +483,29 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         state.v = z[n:].copy()
         return cost
 
+    def _batch_plan(self, smap):
+        """``(smap, tier1, forms, chains)`` of a segment map for :meth:`_advance_batch`: ``tier1``
+        the rows of ``smap.stacked`` tier 1 needs (watched functions and drift rates at the
+        start, then ``Re, Im W z'(0)``), ``forms`` the damping and input forms as two rows (for
+        ``<Q, Y'Y>``), ``chains`` the chains by interval count (:meth:`_chain`).  Cached per map
+        (at most ``MAX_PLANS``, the map itself kept so that its id is not reused)."""
+        plan = self._plans.get(id(smap))
+        if plan is not None and plan[0] is smap:
+            return plan
+        n = self.n
+        tier1 = np.ascontiguousarray(np.vstack([smap.stacked[2 * n:6 * n], smap.scan[-4 * n:]]))
+        forms = np.ascontiguousarray(np.vstack([smap.damping.ravel(), smap.input.ravel()]))
+        if len(self._plans) >= MAX_PLANS:
+            self._plans.pop(next(iter(self._plans)))
+        plan = self._plans[id(smap)] = (smap, tier1, forms, {})
+        return plan
+
     def _chain(self, smap, count: int) -> np.ndarray:
         """The block matrix giving the states ``z_1 .. z_count`` (rows of ``2n``) after ``count``
         intervals of ``smap``'s length from ``x = [z0; p; ag_0, slope_0, ..., ag_count-1,
         slope_count-1]``: ``z_j = S^j z0 + sum_{i<j} S^i S_p p + sum_{i<j} S^(j-1-i) S_a [ag_i;
-        slope_i]`` with ``smap.state = [S, S_a, S_p]``.  Cached per map and count (at most
-        ``MAX_CHAINS``; a step of 32 intervals of a 20-storey building is 1.3 MB)."""
-        key = (id(smap), count)
-        entry = self._chains.get(key)
-        if entry is not None and entry[0] is smap:   # the map itself is kept: its id is not reused
-            return entry[1]
+        slope_i]`` with ``smap.state = [S, S_a, S_p]``.  Kept in the map's plan, at most
+        ``MAX_CHAINS`` counts per map (a step of 32 intervals of a 20-storey building: 1.3 MB)."""
         n = self.n
         two_n = 2 * n
         state = smap.state
@@ -495,10 +523,31 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             block[:, two_n:3 * n] = forced
             for i in range(j):
                 block[:, 3 * n + 2 * i:3 * n + 2 * i + 2] = ramps[j - 1 - i]
-        if len(self._chains) >= MAX_CHAINS:
-            self._chains.pop(next(iter(self._chains)))
-        self._chains[key] = (smap, chain)
+        chains = self._batch_plan(smap)[3]
+        if len(chains) >= MAX_CHAINS:
+            chains.pop(next(iter(chains)))
+        chains[count] = chain
         return chain
+
+    def advance_unmapped(self, state, h: float, ag: float, force) -> StepCost:
+        """One zero-order-hold step (``ag`` held, m/s^2) of the elastic building from its modal
+        solution at ``h``, without the matrices of its length (:meth:`Configuration.segment_map`,
+        whose energy forms cost a quadrature over a tensor of every mode, node and input: 1 to
+        40 ms for 15 storeys): the state, the energies by the quadrature of the solution itself,
+        the peaks as in :meth:`_interval`.  For a length stepped once."""
+        n = self.n
+        cost = StepCost(segments=1)
+        cfg = self.configuration(state.mode)
+        p = np.asarray(force, float)
+        y = np.concatenate((state.u, state.v, (ag, 0.0), p))
+        z0, w = y[:2 * n], y[2 * n:]
+        segment = ModalSegment(cfg, z0, w)
+        z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, h)
+        e_damp, e_in = cfg.energies(segment.q0, segment.beta0, segment.beta1, w, h)
+        scan = Scan(cfg, cfg.scan_vector(z0, z1, w, h), 0.0, h)
+        self._peaks(cfg, scan, segment, state, y, p, h, EVENT_XTOL * h, cost)
+        self._commit(state, z1, p, e_damp, e_in, yielding=False)
+        return cost
 
     def _interval(self, state, length, ag0, ag1, force, cost, h, start) -> int:
         """One knot interval (linear ground acceleration), split at events."""
