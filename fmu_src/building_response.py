@@ -334,7 +334,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
-        if times.size > 3:          # worth batching (None: an event may occur, interval by interval)
+        if times.size > 3 or (times.size == 3 and not self.hysteresis.inelastic):
+            # worth batching (None: an event may occur, interval by interval)
             cost = self._advance_batch(state, times, ag, force)
             if cost is not None:
                 return cost
@@ -460,19 +461,21 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             rows = need.any(axis=1).nonzero()[0].tolist()
             if rows:
                 scans = Yg[rows] @ smap.scan.T           # the Scan vectors of those intervals only
-                for i, scan_vector in zip(rows, scans):
-                    flagged.append((js[i], scan_vector, need[i]))
+                flagged.append((js, rows, scans, need[rows], smap.length))
         cost.segments = count
-        cost.cleared = count - len(flagged)
+        cost.cleared = count - sum(len(rows) for _, rows, _, _, _ in flagged)
         if flagged:
             xtol = EVENT_XTOL * float(times[-1] - times[0])
-            if len(flagged) > 1:
-                flagged.sort(key=lambda item: item[0])
-            for j, scan_vector, flags in flagged:
-                L = maps[j].length
-                y = Y[j].copy()
-                scan = Scan(cfg, scan_vector, float(y[two_n + 1]), L)
-                self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
+            if len(flagged) == 1:            # one length: the intervals in order, tested together
+                js, rows, scans, need, L = flagged[0]
+                self._interval_peaks(cfg, state, Y[[js[i] for i in rows]], scans, need, p, L, xtol, cost)
+            else:
+                each = sorted((js[i], scan, flags, L) for js, rows, scans, need, L in flagged
+                              for i, scan, flags in zip(rows, scans, need))
+                for j, scan_vector, flags, L in each:
+                    y = Y[j].copy()
+                    scan = Scan(cfg, scan_vector, float(y[two_n + 1]), L)
+                    self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
         state.E_damping += e_damp
         state.E_input += e_in
         u1 = z[:n].copy()
@@ -482,6 +485,56 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         state.u = u1
         state.v = z[n:].copy()
         return cost
+
+    def _interval_peaks(self, cfg, state, Y, scans, flags, p, length, xtol, cost) -> None:
+        """:meth:`_peaks` of consecutive intervals of one length, in order: ``Y`` their ``y``
+        rows, ``scans`` their Scan vectors, ``flags`` the functions tier 1 did not clear.
+
+        The Scan bounds of all of them in one product, and the prefilter of :meth:`_peaks` (a
+        function whose Hermite bound stays under its limit, or whose slope provably keeps its
+        sign) over all of them at once, each interval against the peaks as :meth:`_peaks` would
+        see them (the peaks at the start raised by the end values of the intervals before it):
+        only intervals with a function left go through :meth:`_peaks`, with the same decisions.
+        """
+        n = self.n
+        m = 3 * n
+        two_n = 2 * n
+        count = Y.shape[0]
+        G = scans[:, :6 * m].reshape(count, 6, m)            # rows: g(0), g(L), g'(0), g'(L), g''(0), g''(L)
+        re = scans[:, 6 * m:6 * m + two_n]
+        im = scans[:, 6 * m + two_n:]
+        # Scan's bounds (see there), every interval at once
+        amp = np.sqrt(re * re + im * im)
+        ramp = np.abs(Y[:, two_n + 1])[:, None] * cfg.ramp_abs
+        amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
+        bound4 = (cfg.lam3 * amp + cfg.lam2 * ramp) @ cfg.peak_modal_abs.T
+        bound5 = (cfg.lam4 * amp + cfg.lam3 * ramp) @ cfg.peak_modal_abs.T
+        accel_offset = p * self._inv_m
+        offset = np.zeros(m)
+        offset[two_n:] = accel_offset
+        g0 = np.abs(G[:, 0] + offset)
+        g1 = np.abs(G[:, 1] + offset)
+        # the peaks each interval's _peaks starts from: the end values of those before it folded in
+        running = np.maximum.accumulate(np.vstack([state.peaks[None, :], g1]), axis=0)
+        limits = running[1:] + self._peak_atol
+        w4 = length ** 4 / 384.0
+        s0, s1 = np.abs(G[:, 2]), np.abs(G[:, 3])
+        slopes = (s0 + s1) * length
+        reach = np.maximum(g0, g1) + _HERMITE_SLOPE_GAIN * slopes + 1e-12 * (g0 + g1 + slopes) + bound4 * w4
+        curvatures = (np.abs(G[:, 4]) + np.abs(G[:, 5])) * length
+        monotonic = np.minimum(s0, s1) - _HERMITE_SLOPE_GAIN * curvatures - _HERMITE_MARGIN * (
+            s0 + s1 + curvatures) - bound5 * w4 > 0.0
+        monotonic &= G[:, 2] * G[:, 3] > 0.0
+        keep = flags & ~(reach <= limits) & ~monotonic
+        left = keep.any(axis=1).nonzero()[0].tolist()
+        B = np.stack([bound4, bound5], axis=2)               # (count, m, 2) as Scan.B
+        for i in left:
+            state.peaks = np.maximum(state.peaks, running[i])  # the end values before it
+            scan = object.__new__(Scan)
+            scan.G = G[i].T
+            scan.B = B[i]
+            self._peaks(cfg, scan, None, state, Y[i].copy(), p, length, xtol, cost, keep[i])
+        state.peaks = np.maximum(state.peaks, running[-1])
 
     def _batch_plan(self, smap):
         """``(smap, tier1, forms, chains)`` of a segment map for :meth:`_advance_batch`: ``tier1``
