@@ -410,7 +410,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             x[two_n:3 * n] = p
             x[3 * n::2] = ag0
             x[3 * n + 1::2] = slope
-            chain = self._batch_plan(first)[3].get(count)
+            chain = self._batch_plan(first)[4].get(count)
             if chain is None:
                 chain = self._chain(first, count)
             Z = (chain @ x).reshape(count, two_n)
@@ -427,13 +427,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             z = maps[-1].state @ Y[-1]
         e_damp = e_in = 0.0
         flagged = []
-        accel_offset = p * self._inv_m
-        watch_offset = np.zeros(3 * n)
-        watch_offset[two_n:] = accel_offset
         peaks = state.peaks
         for js in groups.values():
             smap = maps[js[0]]
-            _, tier1, forms, _ = self._batch_plan(smap)
+            _, tier1, change, forms, _ = self._batch_plan(smap)
             # the rows of the group, as a slice where they are consecutive (a view, not a copy)
             Yg = Y[js[0]:js[-1] + 1] if js[-1] - js[0] == len(js) - 1 else Y[js]
             # per interval only what tier 1 needs (a product small enough for one BLAS thread:
@@ -441,9 +438,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # step on a loaded machine): the watched functions and drift rates at the start,
             # and the modal amplitudes of z'(0)
             out = Yg @ tier1.T
-            bound = np.abs(out[:, 4 * n:]) @ smap.change.T
-            slopes = np.abs(Yg[:, two_n + 1])
-            bound += slopes[:, None] * smap.ramp_change
+            bound = np.abs(out[:, 4 * n:]) @ change   # |Re|, |Im| of W z'(0) and |ag slope|
             if inelastic:
                 # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
                 margin = np.where(elastic, self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n],
@@ -457,9 +452,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # against the peaks at the step start: a superset of what later intervals need; a
             # function cleared here cannot pass the peaks anywhere in the interval (tier 1 is
             # rigorous), so only the others are tested in _peaks
-            need = np.abs(out[:, :3 * n] + watch_offset) + bound[:, :3 * n] > peaks
-            rows = need.any(axis=1).nonzero()[0].tolist()
-            if rows:
+            need = np.abs(out[:, :3 * n]) + bound[:, :3 * n] > peaks
+            if need.any():
+                rows = need.any(axis=1).nonzero()[0].tolist()
                 scans = Yg[rows] @ smap.scan.T           # the Scan vectors of those intervals only
                 flagged.append((js, rows, scans, need[rows], smap.length))
         cost.segments = count
@@ -537,20 +532,27 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         state.peaks = np.maximum(state.peaks, running[-1])
 
     def _batch_plan(self, smap):
-        """``(smap, tier1, forms, chains)`` of a segment map for :meth:`_advance_batch`: ``tier1``
-        the rows of ``smap.stacked`` tier 1 needs (watched functions and drift rates at the
-        start, then ``Re, Im W z'(0)``), ``forms`` the damping and input forms as two rows (for
-        ``<Q, Y'Y>``), ``chains`` the chains by interval count (:meth:`_chain`).  Cached per map
-        (at most ``MAX_PLANS``, the map itself kept so that its id is not reused)."""
+        """``(smap, tier1, change, forms, chains)`` of a segment map for :meth:`_advance_batch`:
+        ``tier1 @ y`` gives what tier 1 needs of an interval: the watched functions at its start
+        (the accelerations with their constant part ``p / m``), the drift rates, ``Re, Im W
+        z'(0)`` and the ground acceleration's slope; ``|that[4n:]| @ change`` the tier-1 bound
+        (:meth:`Configuration.change_bounds`, the ramp term as one more row); ``forms`` the
+        damping and input forms as two rows (for ``<Q, Y'Y>``); ``chains`` the chains by
+        interval count (:meth:`_chain`).  Cached per map (at most ``MAX_PLANS``, the map itself
+        kept so that its id is not reused)."""
         plan = self._plans.get(id(smap))
         if plan is not None and plan[0] is smap:
             return plan
         n = self.n
-        tier1 = np.ascontiguousarray(np.vstack([smap.stacked[2 * n:6 * n], smap.scan[-4 * n:]]))
+        slope_row = np.zeros((1, 3 * n + 2))
+        slope_row[0, 2 * n + 1] = 1.0
+        tier1 = np.vstack([smap.stacked[2 * n:6 * n], smap.scan[-4 * n:], slope_row])
+        tier1[2 * n:3 * n, 2 * n + 2:] = np.diag(self._inv_m)
+        change = np.ascontiguousarray(np.vstack([smap.change.T, smap.ramp_change[None, :]]))
         forms = np.ascontiguousarray(np.vstack([smap.damping.ravel(), smap.input.ravel()]))
         if len(self._plans) >= MAX_PLANS:
             self._plans.pop(next(iter(self._plans)))
-        plan = self._plans[id(smap)] = (smap, tier1, forms, {})
+        plan = self._plans[id(smap)] = (smap, np.ascontiguousarray(tier1), change, forms, {})
         return plan
 
     def _chain(self, smap, count: int) -> np.ndarray:
@@ -576,7 +578,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             block[:, two_n:3 * n] = forced
             for i in range(j):
                 block[:, 3 * n + 2 * i:3 * n + 2 * i + 2] = ramps[j - 1 - i]
-        chains = self._batch_plan(smap)[3]
+        chains = self._batch_plan(smap)[4]
         if len(chains) >= MAX_CHAINS:
             chains.pop(next(iter(chains)))
         chains[count] = chain

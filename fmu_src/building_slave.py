@@ -246,6 +246,12 @@ class Building(Fmi2Slave):
         self._derived_rows = dict(zip(_DERIVED, self._derived_block))
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
+        # [drift; a] = P [u; v; f] for the linear building's outputs (_publish)
+        publish = np.zeros((2 * n, 3 * n))
+        publish[:n, :n] = np.eye(n) - np.eye(n, k=-1)
+        publish[n:, :2 * n] = self._R
+        publish[n:, 2 * n:] = np.diag(1.0 / building.masses)
+        self._publish_rows = publish
         self._steps = {}
         self._step_aliases = {}
         self._stepped_lengths = frozenset()
@@ -256,6 +262,25 @@ class Building(Fmi2Slave):
     def _publish(self, force) -> None:
         """Outputs from the state (the integrator path and initialisation)."""
         n, state = self._n, self._state
+        if self._legacy:
+            # the linear building: drift and acceleration in one product
+            u, v = state.u, state.v
+            w = self._publish_rows @ np.concatenate((u, v, force))
+            drift = w[:n]
+            self.x[:n] = u
+            self.v[:n] = v
+            self.drift[:n] = drift
+            self.a[:n] = w[n:]
+            k = self._building.stiffnesses
+            self.base_shear = float(k[0] * drift[0])
+            self.E_kinetic = 0.5 * float(v @ (self._building.masses * v))
+            self.E_strain = 0.5 * float(k @ (drift * drift))
+            self.E_input = state.E_input
+            self.E_external = state.E_external
+            self.E_damping = state.E_damping
+            self.E_hysteretic = state.E_hysteretic
+            self._derived_cache = None
+            return
         drift, V, accel, strain = self._integrator.response(state, force, acceleration=not self._legacy)
         self.x[:n] = state.u
         self.v[:n] = state.v
