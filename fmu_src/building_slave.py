@@ -21,9 +21,11 @@ through ``(t_knot[k], ag_knot[k])`` which must cover the step ``[t, t+h]`` (feed
 FMU's knots of the same step; ``ag`` is then ignored).
 
 Integration (``fmu_src/building_response.py``): exact for linear and bilinear storeys (the
-linear zero-order-hold step is one matrix-vector product with a matrix cached per step size,
-bit for bit the model of earlier versions; otherwise the modal solution with yield and
-unloading events located inside the step); Bouc-Wen by an embedded Runge-Kutta 8(5,3) method
+linear zero-order-hold step is one matrix-vector product with the matrix of earlier versions,
+cached per step length to round-off (``linear_response.canonical_length``); the first step of
+a length, which a run may take only once, from the modal solution instead of building that
+matrix; otherwise the modal solution with yield and unloading events located inside the step,
+a step over several record intervals of one length in one product); Bouc-Wen by an embedded Runge-Kutta 8(5,3) method
 with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
 ``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
