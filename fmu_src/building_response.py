@@ -381,10 +381,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         inelastic = self.hysteresis.inelastic
         p = self._net_force(state, force)
         size = 3 * n + 2
-        if bool((lengths > 0.0).all()):              # no jump: slices, the same arithmetic
+        positive = lengths.tolist()
+        if min(positive) > 0.0:                      # no jump: slices, the same arithmetic
             ag0 = ag[:-1]
             slope = (ag[1:] - ag[:-1]) / lengths
-            positive = lengths.tolist()
         else:                                        # equal times: a jump, no time passes
             idx = (lengths > 0.0).nonzero()[0]
             ag0 = ag[idx]
@@ -401,23 +401,20 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         Y[:, two_n] = ag0
         Y[:, two_n + 1] = slope
         Y[:, two_n + 2:] = p
-        Y[0, :n] = state.u
-        Y[0, n:two_n] = state.v
         if uniform:
-            # z_1 .. z_count in one product, x = [z0; p; ag_0, slope_0, ag_1, ...]
-            x = np.empty(3 * n + 2 * count)
-            x[:two_n] = Y[0, :two_n]
-            x[two_n:3 * n] = p
-            x[3 * n::2] = ag0
-            x[3 * n + 1::2] = slope
+            # z_1 .. z_count in one product, x = [z0; p; ag_0 .. ag_count-1; slope_0 .. slope_count-1]
+            x = np.concatenate((state.u, state.v, p, ag0, slope))
             chain = self._batch_plan(first)[4].get(count)
             if chain is None:
                 chain = self._chain(first, count)
             Z = (chain @ x).reshape(count, two_n)
+            Y[0, :two_n] = x[:two_n]
             Y[1:, :two_n] = Z[:-1]
             z = Z[-1]
             groups = {id(first): range(count)}
         else:
+            Y[0, :n] = state.u
+            Y[0, n:two_n] = state.v
             groups = {}                              # intervals by map (lengths equal to round-off share one)
             for j, smap in enumerate(maps):
                 groups.setdefault(id(smap), []).append(j)
@@ -473,12 +470,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
         state.E_damping += e_damp
         state.E_input += e_in
-        u1 = z[:n].copy()
+        u1 = z[:n]                  # views of a fresh product: nothing else writes to it
         state.E_external += float(force @ (u1 - state.u))
         if yielding:
             self._yield_along(state, u1)
         state.u = u1
-        state.v = z[n:].copy()
+        state.v = z[n:]
         return cost
 
     def _interval_peaks(self, cfg, state, Y, scans, flags, p, length, xtol, cost) -> None:
@@ -557,7 +554,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def _chain(self, smap, count: int) -> np.ndarray:
         """The block matrix giving the states ``z_1 .. z_count`` (rows of ``2n``) after ``count``
-        intervals of ``smap``'s length from ``x = [z0; p; ag_0, slope_0, ..., ag_count-1,
+        intervals of ``smap``'s length from ``x = [z0; p; ag_0 .. ag_count-1; slope_0 ..
         slope_count-1]``: ``z_j = S^j z0 + sum_{i<j} S^i S_p p + sum_{i<j} S^(j-1-i) S_a [ag_i;
         slope_i]`` with ``smap.state = [S, S_a, S_p]``.  Kept in the map's plan, at most
         ``MAX_CHAINS`` counts per map (a step of 32 intervals of a 20-storey building: 1.3 MB)."""
@@ -577,12 +574,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             block[:, :two_n] = power
             block[:, two_n:3 * n] = forced
             for i in range(j):
-                block[:, 3 * n + 2 * i:3 * n + 2 * i + 2] = ramps[j - 1 - i]
+                block[:, 3 * n + i] = ramps[j - 1 - i][:, 0]
+                block[:, 3 * n + count + i] = ramps[j - 1 - i][:, 1]
         chains = self._batch_plan(smap)[4]
         if len(chains) >= MAX_CHAINS:
             chains.pop(next(iter(chains)))
         chains[count] = chain
         return chain
+
+    def fits_unmapped(self, h: float) -> bool:
+        """True if :meth:`advance_unmapped` can take a step of ``h`` s (its quadrature stays within
+        ``MAX_CHUNKS`` chunks of the fastest mode; a longer zero-order-hold step takes the matrices,
+        which have no such limit)."""
+        return math.ceil(self.configuration(np.zeros(self.n, dtype=np.int64)).rate * h / CHUNK_RATE) <= MAX_CHUNKS
 
     def advance_unmapped(self, state, h: float, ag: float, force) -> StepCost:
         """One zero-order-hold step (``ag`` held, m/s^2) of the elastic building from its modal

@@ -25,8 +25,8 @@ linear zero-order-hold step is one matrix-vector product with the matrix of earl
 cached per step length to round-off (``linear_response.canonical_length``); the first step of
 a length, which a run may take only once, from the modal solution instead of building that
 matrix; otherwise the modal solution with yield and unloading events located inside the step,
-a step over several record intervals of one length in one product); Bouc-Wen by an embedded Runge-Kutta 8(5,3) method
-with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
+a step over several record intervals of one length in one product); Bouc-Wen by an embedded
+Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
 ``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
 ``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
@@ -315,7 +315,7 @@ class Building(Fmi2Slave):
         entry = self._step_aliases.get(step_size)
         if entry is None:
             key = canonical_length(step_size)
-            if key not in self._stepped_lengths and not self._free_mass:
+            if key not in self._stepped_lengths and self._unmapped_fits(key):
                 self._stepped(key)
                 return None
             entry = self._steps.get(key)
@@ -324,10 +324,15 @@ class Building(Fmi2Slave):
             if len(self._step_aliases) >= _MAX_STEP_ALIASES:
                 self._step_aliases.clear()
             self._step_aliases[step_size] = entry
-        elif entry[2] not in self._stepped_lengths and not self._free_mass:
+        elif entry[2] not in self._stepped_lengths and self._unmapped_fits(entry[2]):
             self._stepped(entry[2])      # a state restored from before the first step of this length
             return None
         return entry
+
+    def _unmapped_fits(self, h: float) -> bool:
+        """True if a step of ``h`` s can be taken without matrices (not a free mass, whose modal
+        basis is defective; a quadrature within its limit, ``ExactPiecewiseLinear.fits_unmapped``)."""
+        return not self._free_mass and self._integrator.fits_unmapped(h)
 
     def _stepped(self, key: float) -> None:
         lengths = self._stepped_lengths if len(self._stepped_lengths) < _MAX_CACHED_STEPS else frozenset()
@@ -355,7 +360,8 @@ class Building(Fmi2Slave):
             # the block exponential (and Van Loan's damping integral, which grows like
             # exp(2 zeta w h)) overflows: no step of this length can be computed
             fastest = float(np.max(b.omegas))
-            raise SlaveError(f"a step of h = {asked if asked is not None else h!r} s is beyond what the building's arithmetic supports (its step "
+            asked = h if asked is None else asked
+            raise SlaveError(f"a step of h = {asked!r} s is beyond what the building's arithmetic supports (its step "
                              f"matrix overflows; fastest mode {fastest:.3g} rad/s, zeta = {b.damping_ratio:g}); "
                              f"use a shorter step")
         peaks = None if self._free_mass else self._integrator.legacy_rows(h)
@@ -502,9 +508,10 @@ class Building(Fmi2Slave):
             raise SlaveError(f"input n_knots = {count} is outside the allowed range: 0 (ag held) or "
                              f"2 <= n_knots <= {KNOT_CAPACITY}")
         times = self.t_knot[:count]
-        values = self.ag_knot[:count]
+        values = self.ag_knot[:count].copy()
+        listed = times.tolist()      # the checks on Python floats: the same IEEE comparisons, cheaper
         # (a sum that is not finite is looked at element by element)
-        if not math.isfinite(float(times.sum()) + float(values.sum())) and not (
+        if not math.isfinite(sum(listed) + float(values.sum())) and not (
                 np.isfinite(times).all() and np.isfinite(values).all()):
             for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
                 bad = np.flatnonzero(~np.isfinite(arr))
@@ -512,19 +519,22 @@ class Building(Fmi2Slave):
                     i = int(bad[0])
                     raise SlaveError(f"input {name}[{i + 1}] = {float(arr[i])!r} {unit} is not finite")
         tol = _KNOT_TIME_TOL * h
-        if abs(times[0] - t) > tol or abs(times[-1] - (t + h)) > tol:
+        first, last = listed[0], listed[-1]
+        if abs(first - t) > tol or abs(last - (t + h)) > tol:
             raise SlaveError(
-                f"the knots t_knot[1..{count}] cover [{times[0]:.9g}, {times[-1]:.9g}] s but this step is "
+                f"the knots t_knot[1..{count}] cover [{first:.9g}, {last:.9g}] s but this step is "
                 f"[{t:.9g}, {t + h:.9g}] s: feed the ground motion's knots of the same step (step the "
                 f"ground motion first, as Gauss-Seidel does; a Jacobi master hands over the previous "
                 f"step's) or set n_knots = 0")
-        rel = times - t
-        if (rel[1:] < rel[:-1]).any():
+        if listed != sorted(listed):
             i = int(np.flatnonzero(np.diff(times) < 0.0)[0])
             raise SlaveError(f"input t_knot must not decrease: t_knot[{i + 1}] = {times[i]:.9g} s > "
                              f"t_knot[{i + 2}] = {times[i + 1]:.9g} s")
+        rel = times - t
         rel[0] = 0.0
         rel[-1] = h
-        np.maximum(rel, 0.0, out=rel)    # np.clip's arithmetic without its Python overhead
-        np.minimum(rel, h, out=rel)
-        return rel, values.copy()
+        # non-decreasing: only the inner ends can leave [0, h] (by the ends' tolerance)
+        if listed[1] - t < 0.0 or listed[-2] - t > h:
+            np.maximum(rel, 0.0, out=rel)    # np.clip's arithmetic without its Python overhead
+            np.minimum(rel, h, out=rel)
+        return rel, values
