@@ -25,10 +25,25 @@ fmi2GetFMUstate / fmi2SetFMUstate with deferred peak searches pending.
 doStep + getReal of every output for the linear and the bilinear building, and the floor of
 pythonfmu itself: a getReal of one output, a setReal of one input, and a doStep whose Python
 side is known (the difference is what pythonfmu and fmpy add per call).
+
+``--scene NAME`` (repeatable) measures the building steps of a real run instead: the scene runs
+once through the FMUs with every call the master makes on building.fmu's slave objects recorded
+(pythonfmu's FMUs live in this interpreter), then the calls are replayed on the ``Building``
+class of each ``--source`` tree (a checkout's root; default this one) in subprocesses taking
+turns, ``--repeat`` rounds, and the CPU time per doStep is printed by kind of step (zero-order
+hold, or the number of knots), best of the rounds, with the largest change of any output read
+against the first source relative to that output's largest magnitude::
+
+    python benchmarks/bench_building_step.py --scene default --scene kasai_maison \
+        --source /path/to/main --source .
+
+(one BLAS thread in the replays, ``OPENBLAS_NUM_THREADS=1``: a loaded machine made
+multithreaded products 10 to 100 times slower and the figures meaningless.)
 """
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -36,7 +51,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+# a replay (--replay) imports the slave class of the tree given by --source
+_SOURCE = next((sys.argv[i + 1] for i, a in enumerate(sys.argv[:-1]) if a == "--source"), None) \
+    if "--replay" in sys.argv else None
+sys.path.insert(0, str(Path(_SOURCE).resolve() if _SOURCE else ROOT))
 
 from fmu_src.building_slave import Building  # noqa: E402
 from fmu_src.ground_records import G, load_record  # noqa: E402
@@ -89,7 +107,14 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--fmpy", action="store_true", help="also time set + doStep + getReal through fmpy")
+    parser.add_argument("--scene", action="append", default=[], help="replay the building steps of this scene")
+    parser.add_argument("--source", action="append", default=[], help="tree whose Building class replays")
+    parser.add_argument("--replay", help=argparse.SUPPRESS)        # (a subprocess of --scene)
     args = parser.parse_args(argv)
+    if args.replay:
+        return replay(args.replay, args.repeat)
+    if args.scene:
+        return scene_costs(args.scene, args.source or [str(ROOT)], args.repeat)
     rec = load_record("elcentro1940")
     rec = rec.scaled(0.3 * G / rec.pga)
     cases = [(n, "linear", 0.01, False) for n in BUILDINGS] + \
@@ -255,6 +280,133 @@ def floor(fmu, variables, values, steps_done: int) -> None:
     print("\n  the floor of one FMI call (wall us): through fmpy + pythonfmu, on the slave in-process, difference")
     for label, through, inside in rows:
         print(f"  {label:>40} {through:8.2f} {inside:8.2f} {through - inside:8.2f}")
+
+
+_RECORDED = ("set_real", "get_real", "set_integer", "set_string", "set_boolean", "do_step", "setup_experiment",
+             "enter_initialization_mode", "exit_initialization_mode")
+
+
+def record_scene(scene: str) -> list:
+    """The calls a run of ``scene`` makes on its building.fmu slave objects: ``(instance,
+    method, args, result)``; FMU states are left out (a replay does not restore them)."""
+    from cosim import run_scene
+
+    run_scene(scene, write=False, progress=False)           # builds and loads the FMUs
+    classes = [m.Building for name, m in list(sys.modules.items())
+               if name.startswith("pounding_cosim_building") and name.endswith(".building_slave")]
+    trace, ids = [], {}
+    saved = []
+    for cls in classes:
+        for method in _RECORDED + ("__init__",):
+            original = getattr(cls, method)
+            saved.append((cls, method, original))
+
+            def wrapped(self, *args, _original=original, _method=method, **kwargs):
+                result = _original(self, *args, **kwargs)
+                key = ids.setdefault(id(self), len(ids))
+                if _method == "__init__":
+                    trace.append((key, _method, (kwargs.get("instance_name"),), None))
+                else:
+                    trace.append((key, _method, tuple(list(a) if isinstance(a, (list, tuple)) else a for a in args),
+                                  list(result) if isinstance(result, list) else result))
+                return result
+            setattr(cls, method, wrapped)
+    try:
+        run_scene(scene, write=False, progress=False)
+    finally:
+        for cls, method, original in saved:
+            setattr(cls, method, original)
+    return trace
+
+
+def replay(path: str, repeat: int) -> int:
+    """Replay a recorded trace on this tree's Building class: prints a JSON line with the CPU
+    time per doStep by kind (best of ``repeat``) and every output read."""
+    import json
+    import pickle
+
+    with open(path, "rb") as f:
+        trace = pickle.load(f)
+    best: dict[int, float] = {}
+    counts: dict[int, int] = {}
+    outputs = []
+    for round_ in range(repeat):
+        instances, spent, steps = {}, {}, {}
+        clock = time.process_time
+        for key, method, args, result in trace:
+            if method == "__init__":
+                instances[key] = Building(instance_name=args[0], resources=None, visible=False, logger=None)
+                continue
+            b = instances[key]
+            if method == "do_step":
+                kind = int(b.n_knots)
+                start = clock()
+                ok = b.do_step(*args)
+                spent[kind] = spent.get(kind, 0.0) + clock() - start
+                steps[kind] = steps.get(kind, 0) + 1
+                if ok != result:
+                    raise SystemExit(f"the replayed doStep{args} gave {ok}, the run {result}: {b._error}")
+            elif method == "get_real":
+                values = b.get_real(*args)
+                if round_ == 0:
+                    outputs.append((key, args[0], values))
+            else:
+                getattr(b, method)(*args)
+        for kind, cpu in spent.items():
+            best[kind] = min(best.get(kind, math.inf), cpu / steps[kind])
+        counts = steps
+    print(json.dumps({"us": {k: 1e6 * v for k, v in best.items()}, "steps": counts}))
+    with open(path + ".out", "wb") as f:
+        pickle.dump(outputs, f)
+    return 0
+
+
+def scene_costs(scenes, sources, repeat: int) -> None:
+    """CPU us per building doStep of each scene's recorded run, per source tree, interleaved."""
+    import json
+    import os
+    import pickle
+    import subprocess
+    import tempfile
+
+    from cosim.master.fmi import exit_process
+
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    with tempfile.TemporaryDirectory() as tmp:
+        for scene in scenes:
+            trace_path = str(Path(tmp) / f"{scene}.trace")
+            with open(trace_path, "wb") as f:
+                pickle.dump(record_scene(scene), f)
+            best = {src: {} for src in sources}
+            outputs = {}
+            for _ in range(repeat):
+                for src in sources:
+                    done = subprocess.run([sys.executable, __file__, "--replay", trace_path, "--source", src,
+                                           "--repeat", "2"], env=env, capture_output=True, text=True)
+                    if done.returncode:
+                        raise SystemExit(done.stderr[-2000:])
+                    figures = json.loads(done.stdout.strip().splitlines()[-1])
+                    for kind, us in figures["us"].items():
+                        best[src][int(kind)] = min(best[src].get(int(kind), math.inf), us)
+                    counts = {int(k): v for k, v in figures["steps"].items()}
+                    with open(trace_path + ".out", "rb") as f:
+                        outputs[src] = pickle.load(f)
+            total = sum(counts.values())
+            print(f"\n{scene}: {total} building doSteps (kinds: 0 = ag held, k = k knots), CPU us per doStep, "
+                  f"best of {repeat} rounds (one BLAS thread)")
+            reference = outputs[sources[0]]
+            for src in sources:
+                mean = sum(best[src][k] * counts[k] for k in counts) / total
+                scale, change = {}, {}
+                for (key, vrs, values), (_, _, ref) in zip(outputs[src], reference):
+                    for vr, a, r in zip(vrs, values, ref):
+                        scale[key, vr] = max(scale.get((key, vr), 0.0), abs(r))
+                        change[key, vr] = max(change.get((key, vr), 0.0), abs(a - r))
+                worst = max((change[k] / scale[k] for k in change if scale[k] > 0.0), default=0.0)
+                kinds = "  ".join(f"{k}: {best[src][k]:.1f} ({counts[k]})" for k in sorted(counts))
+                print(f"  {src}: {mean:.1f} us per doStep;  by kind (steps): {kinds};  outputs vs "
+                      f"{sources[0]}: {worst:.1e} of their scale")
+    exit_process(0)
 
 
 if __name__ == "__main__":

@@ -167,7 +167,7 @@ def array(name: str, count: int, **kwargs) -> tuple[Variable, ...]:
 
 
 #: values an FMU state keeps as they are: nothing can change them in place
-_IMMUTABLE = (float, int, str, bytes, type(None), np.generic)
+_IMMUTABLE = (float, int, str, bytes, frozenset, type(None), np.generic)
 
 
 def snapshot(value: Any) -> Any:

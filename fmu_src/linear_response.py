@@ -65,6 +65,26 @@ ROUNDOFF = 1e-12                   # relative round-off of a modal evaluation (c
 MAX_CHUNKS = 4096                  # bound on one segment's quadrature work
 _SERIES_RADIUS = 0.25              # phi functions by series inside this radius
 _SERIES_TERMS = 14                 # 0.25^14 / 14! ~ 3e-20
+# Lengths that differ by round-off only share their matrices: a host's t_next - t and the
+# differences of a record's absolute knot times repeat a length only to the round-off of the
+# times (measured in 40 s runs: 10 ms steps from 0.00999999999999801 to 0.010000000000001563 s,
+# 10 ms knot intervals from 0.01 - 3e-14 to 0.01 + 3e-14 s); 12 significant digits (a grid of
+# 1e-12 to 1e-11 of the length, 1e-13 s at 10 ms) merge them and nothing a host means apart.
+LENGTH_DIGITS = 12
+
+
+def canonical_length(length: float) -> float:
+    """``length`` (s) rounded to ``LENGTH_DIGITS`` significant decimal digits: the length whose
+    matrices serve every length that differs from it by round-off only.
+
+    The decade is taken from a length larger by a relative 1e-9, so that a length just below a
+    power of ten by round-off (0.00999999999999801) rounds to it (0.01) and not onto the finer
+    grid of the decade below.  A decimal length (0.01, 0.005) is its own canonical length, so a
+    host that repeats it exactly gets the matrices of that very length.
+    """
+    if not (0.0 < length < math.inf):
+        return length
+    return round(length, LENGTH_DIGITS - 1 - math.floor(math.log10(length) + 1e-9))
 
 
 def phi_functions(x, second: bool = True):
@@ -359,14 +379,14 @@ class Configuration:
         found = self._exact.get(length)
         if found is not None:
             return found
-        key = float(f"{length:.12g}")   # equal lengths that differ by time round-off share a map
+        key = canonical_length(float(length))   # lengths equal to round-off share one map
         found = self._maps.get(key)
         if found is not None:
             if len(self._exact) >= 4 * self.max_maps:
                 self._exact.clear()
             self._exact[length] = found
             return found
-        length = float(length)
+        asked, length = length, key        # computed at the canonical length: the same map whichever came first
         n = self.n
         size = 3 * n + 2
         # Modal map of y = [z0; w]: q(s) = E(s) [W z0] + s phi1 [WB0 w] + s^2 phi2 [WB1 w].
@@ -406,7 +426,7 @@ class Configuration:
             self._maps.popitem(last=False)
             self._exact.clear()
         self._maps[key] = result
-        self._exact[length] = result
+        self._exact[asked] = result
         self.maps_built += 1
         return result
 
