@@ -97,14 +97,15 @@ def row_step(row_interval: float, h_base: float) -> float:
 
 
 # -- the strategy ----------------------------------------------------------------------------------
-#: base steps one catch-up step of a waking contact spans at most (:mod:`cosim.master.dormancy`):
-#: the resolver predicts a step's flight from the structures' motion over its previous step,
-#: which holds over a few base steps (default scene: no catch-up redone at 4, 9 of 12 at 16)
+#: base steps a piece of a waking contact's catch-up spans at most (:mod:`cosim.master.dormancy`).
+#: The skipped interval itself is one step the master declares open (``gap_open``); pieces are
+#: cut only from long steps among the last skipped steps, which the contact takes as it would
+#: have, and in a replay: there the resolver predicts a step's flight from the structures' motion
+#: over its previous step, which holds over a few base steps
 CATCH_UP_STEPS = 4
 #: and at most this long (s): the prediction's error grows with the piece's length in seconds, not
-#: in base steps; pieces of 0.04 s start no spurious impact on any bundled scene, while with a
-#: 20 ms base step 4 base steps (0.08 s) started one on free_vibration (6 impacts of 5, 8.7 %
-#: energy; tests/test_dormancy.py)
+#: in base steps (before the declaration, 4 base steps of 20 ms, 0.08 s, started a spurious
+#: impact on free_vibration when the whole interval was caught up in pieces; tests/test_dormancy.py)
 MAX_CATCH_UP_SPAN = 0.04
 #: base steps a proof with no contact force looks ahead (a proof costs about as much as an FMI
 #: call or two; a longer horizon is valid longer where the gaps are wide, and no shorter where
@@ -163,7 +164,8 @@ class Adaptive(CouplingStrategy):
     long_steps : bool, optional
         Steps of up to ``max_long_step`` where every gap provably stays open for the step and
         one base step more; default: with ``dormancy`` (the contacts sleep through long steps
-        and their catch-up cuts them into pieces of at most ``catch_up_span``), else when every
+        and their catch-up declares the skipped interval open, cutting only the last skipped steps into
+        pieces of at most ``catch_up_span``), else when every
         contact FMU takes such steps (:attr:`cosim.fmus.FmuSpec.long_quiet_steps`, or
         ``resolve_impacts = false``).
     max_long_step : float
