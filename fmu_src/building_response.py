@@ -51,8 +51,8 @@ from scipy.optimize import brentq
 
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, first_root,
-                              hermite_range_scalar, max_abs)
+from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, TaylorSegment,
+                              first_root, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -601,7 +601,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     candidates.append((i, 0))
         if not candidates:
             return None
-        segment = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+        segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], rem)
         best = None
         D = self._drift_rows
         for i, kind in candidates:
@@ -712,13 +712,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         new = state.peaks.copy()
         atol = self._peak_atol
         segments = {}
+        inelastic = self.hysteresis.inelastic
         for j, bound, key, y, length, xtol in sorted(state.pending, key=lambda e: -e[1]):
             if bound <= new[j] + atol[j]:
                 continue
             cfg = self._configuration_of(key)
             segment = segments.get(id(y))
             if segment is None:
-                segment = segments[id(y)] = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+                # a yielding building's searches run on Taylor polynomials; a linear building
+                # keeps the modal evaluation of earlier versions (bit for bit)
+                segment = segments[id(y)] = (TaylorSegment(cfg, y[:2 * n], y[2 * n:], length) if inelastic
+                                             else ModalSegment(cfg, y[:2 * n], y[2 * n:]))
             offset = y[2 * n + 2 + j - 2 * n] * self._inv_m[j - 2 * n] if j >= 2 * n else 0.0
             cost.peak_searches += 1
             new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,

@@ -550,6 +550,10 @@ class ModalSegment:
             out.append(float((c_modal @ term).real))
         return out
 
+    def evaluator(self, c_modal: np.ndarray, count: int):
+        """``s -> derivatives(c_modal, s, count)``: what the searches call at every point."""
+        return lambda s: self.derivatives(c_modal, s, count)
+
     def magnitudes(self, c_modal_abs: np.ndarray, s: float, count: int) -> list[float]:
         """``sum |c_j| |q_j^(k)(s)|`` for ``k = 0 .. count-1``: the scale of each derivative's
         round-off."""
@@ -586,6 +590,105 @@ class ModalSegment:
         b4 = float(c_modal_abs @ (cfg.lam3 * amp + cfg.lam2 * ramp))
         b5 = float(c_modal_abs @ (cfg.lam4 * amp + cfg.lam3 * ramp))
         return b4, b5
+
+
+class TaylorSegment(ModalSegment):
+    """A :class:`ModalSegment` of known length ``L`` whose searches run on Python floats.
+
+    For a short segment (``rho = max|lam| L <= TAYLOR_MAX_SPAN``) every searched function
+    ``g = c' z`` is evaluated by its Taylor polynomial at the start,
+
+        g(s) = sum_k a_k s^k,   a_k = Re(c' q^(k)(0)) / k!,
+        q^(1)(0) = q'(0),   q^(2)(0) = lam q'(0) + beta1,   q^(k)(0) = lam q^(k-1)(0)  (k >= 3),
+
+    truncated where the remainder of the highest derivative asked, ``rho^(K+1) / (K+1)!``
+    relative to the modal amplitude of that derivative, is below ``TAYLOR_TRUNCATION``: exact
+    to round-off like the modal form, whose terms it sums in another order (the terms'
+    magnitudes sum to at most ``e^rho`` times that amplitude, so for ``rho <= 2`` the round-off
+    stays within a few ulp of the modal evaluation's, far inside the searches' ``ROUNDOFF``).
+    One small matrix product per function and segment replaces an exponential of every mode
+    at every point of a search.  The bounds of higher derivatives over ``[s, s + w]`` come from
+    the start (:meth:`bound`): ``q'' = lam q' + beta1`` gives ``|q_j'(t)| <= (|q_j'(0)| + t
+    |beta1_j|) e^{max(Re lam, 0) t}``, with no evaluation at ``s``.  A longer segment is
+    evaluated in modal form.  Used for yielding buildings; a linear building keeps
+    :class:`ModalSegment` (bit for bit the results of earlier versions).
+    """
+
+    __slots__ = ("length", "_taylor", "_amp0", "_ramp")
+
+    def __init__(self, cfg: Configuration, z0: np.ndarray, w: np.ndarray, length: float):
+        super().__init__(cfg, z0, w)
+        self.length = float(length)
+        q0, beta1 = self.q0, self.beta1
+        dq0 = cfg.lam * q0 + self.beta0
+        # the start needs no evaluation: what modal_at(0) gives, bit for bit
+        self._memo[0.0] = (q0, dq0)
+        self._amp0 = np.abs(dq0)
+        self._ramp = np.abs(beta1)
+        rho = cfg.rate * self.length
+        self._taylor = (_taylor_columns(cfg.lam, q0, dq0, beta1, _taylor_degree(rho))
+                        if rho <= TAYLOR_MAX_SPAN else None)
+
+    def evaluator(self, c_modal: np.ndarray, count: int):
+        if self._taylor is None or count > _TAYLOR_DERIVATIVES + 1:
+            return super().evaluator(c_modal, count)
+        a = (c_modal @ self._taylor).real.tolist()     # Taylor coefficients of g at 0
+        polys = [a[::-1]]                               # highest degree first, for Horner
+        for _ in range(1, count):
+            a = [k * a[k] for k in range(1, len(a))]
+            polys.append(a[::-1])
+
+        def values(s):
+            out = []
+            for coefficients in polys:
+                v = 0.0
+                for ck in coefficients:
+                    v = v * s + ck
+                out.append(v)
+            return out
+        return values
+
+    def bound(self, c_modal_abs: np.ndarray, order: int, s: float, length: float) -> float:
+        return float(c_modal_abs @ self._powers(order, s + length))
+
+    def bounds45(self, c_modal_abs: np.ndarray, s: float, length: float) -> tuple[float, float]:
+        end = s + length
+        return float(c_modal_abs @ self._powers(4, end)), float(c_modal_abs @ self._powers(5, end))
+
+    def _powers(self, order: int, end: float) -> np.ndarray:
+        """Per mode, a bound of ``|q_j^(order)|`` over ``[0, end]`` (``order >= 2``)."""
+        cfg = self.cfg
+        amp = (self._amp0 + end * self._ramp) * math.exp(cfg.growth_rate * end)
+        return cfg.lam_abs ** (order - 1) * amp + cfg.lam_abs ** (order - 2) * self._ramp
+
+
+TAYLOR_MAX_SPAN = 2.0        # max|lam| L up to which TaylorSegment evaluates by polynomial
+TAYLOR_TRUNCATION = 1e-17    # its truncation, relative to the modal amplitude of the derivative
+_TAYLOR_DERIVATIVES = 2      # the highest derivative the searches ask of a polynomial (g'')
+
+
+def _taylor_degree(rho: float) -> int:
+    """Degree of :class:`TaylorSegment`'s polynomials: ``K0 + 3`` with ``K0`` the smallest k with
+    ``rho^(k+1) / (k+1)! < TAYLOR_TRUNCATION`` (the second derivative's polynomial has degree
+    ``K - 2``; one more term makes the tail, a series whose ratio is below 1/2, count too)."""
+    k, term = 0, rho
+    while term >= TAYLOR_TRUNCATION:
+        k += 1
+        term *= rho / (k + 1)
+    return k + _TAYLOR_DERIVATIVES + 1
+
+
+def _taylor_columns(lam, q0, dq0, beta1, degree: int) -> np.ndarray:
+    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`)."""
+    cols = np.empty((lam.size, degree + 1), dtype=complex)
+    cols[:, 0] = q0
+    cols[:, 1] = dq0
+    prev = dq0
+    for k in range(2, degree + 1):
+        # q^(k) / k! = (lam q^(k-1) / (k-1)! + [k == 2] beta1) / k
+        prev = (lam * prev + beta1) / k if k == 2 else lam * prev / k
+        cols[:, k] = prev
+    return cols
 
 
 def _cubic_lower_bound_positive(g0: float, g1: float, g2: float, bound3: float, length: float) -> bool:
@@ -640,8 +743,10 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
     else:
         first = [g0, start[1], start[2]]
 
+    evaluate = segment.evaluator(c_modal, order + 3)
+
     def at(s):
-        d = segment.derivatives(c_modal, s, order + 3)[order:]
+        d = evaluate(s)[order:]
         d[0] += offset
         return d
 
@@ -696,8 +801,10 @@ def max_abs(segment: "ModalSegment", c_modal: np.ndarray, offset: float, length:
     """
     c_abs = np.abs(c_modal)
 
+    evaluate = segment.evaluator(c_modal, 3)
+
     def at(s):
-        d = segment.derivatives(c_modal, s, 3)
+        d = evaluate(s)
         d[0] += offset
         return d
 
