@@ -472,8 +472,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 e_in = float(y @ out[rows + size:])
                 change = smap.change
             else:
-                segment = ModalSegment(cfg, z0, w)
-                z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, rem)
+                # after an event, the rest of the interval (only a yielding building has events)
+                segment = TaylorSegment(cfg, z0, w, rem)
+                z1 = segment.state(rem)
                 scan_vector = cfg.scan_vector(z0, z1, w, rem)
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
@@ -504,19 +505,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
             if inelastic:
-                event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags, unload_flags)
+                segment, event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags,
+                                                   unload_flags, segment)
             stop = rem
             if event is not None:
                 stop = event[0]
-                segment = segment or ModalSegment(cfg, z0, w)
                 if stop > 0.0:
-                    z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, stop)
+                    z1 = segment.state(stop)
                     scan = Scan(cfg, cfg.scan_vector(z0, z1, w, stop), ag1, stop)
                 e_damp = None
             if stop > 0.0:
                 if e_damp is None:
-                    segment = segment or ModalSegment(cfg, z0, w)
-                    e_damp, e_in = cfg.energies(segment.q0, segment.beta0, segment.beta1, w, stop)
+                    e_damp, e_in = segment.energies(w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
@@ -566,8 +566,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     # -- events -------------------------------------------------------------------------------
     def _first_event(self, cfg, scan, state, y, rem, xtol, cost, up_flags=None, down_flags=None,
-                     unload_flags=None):
-        """``(time, storey, kind)`` of the first event in [0, rem], or None.
+                     unload_flags=None, segment=None):
+        """``(segment, event)``: the segment's :class:`TaylorSegment` (``segment``, made if None and
+        needed) and ``(time, storey, kind)`` of the first event in [0, rem], or None.
 
         Events: an elastic storey whose plastic element reaches its strength (``|d - s| = dy``;
         kind = the direction) and a yielding storey whose drift velocity changes sign (kind 0).
@@ -600,8 +601,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if lo - B[r, 1] * w4 <= 0.0:
                     candidates.append((i, 0))
         if not candidates:
-            return None
-        segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], rem)
+            return segment, None
+        if segment is None:
+            segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], rem)
         best = None
         D = self._drift_rows
         for i, kind in candidates:
@@ -615,12 +617,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             c_modal = row @ cfg.V
             horizon = rem if best is None else best[0]
             if horizon <= 0.0:
-                return best
+                return segment, best
             cost.root_searches += 1
             t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
             if t is not None and (best is None or t < best[0]):
                 best = (t, int(i), kind)
-        return best
+        return segment, best
 
     # -- peaks --------------------------------------------------------------------------------
     def _peaks(self, cfg, scan, segment, state, y, p, length, xtol, cost, flags=None):

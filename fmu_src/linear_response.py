@@ -347,8 +347,11 @@ class Configuration:
     def energies(self, q0, beta0, beta1, w: np.ndarray, length: float):
         """``(int_0^L v'Cv ds, -int_0^L (1'M v) ag ds)`` of a segment from its modal start."""
         nodes, weights = self.chunk_nodes(length)
-        n = self.n
-        v = (self.V[n:] @ self.modal_at(q0, beta0, beta1, nodes)).real      # (n, K)
+        v = (self.V[self.n:] @ self.modal_at(q0, beta0, beta1, nodes)).real      # (n, K)
+        return self.quadrature(v, nodes, weights, w)
+
+    def quadrature(self, v: np.ndarray, nodes: np.ndarray, weights: np.ndarray, w: np.ndarray):
+        """:meth:`energies` from the floor velocities ``v`` (n, K) at the quadrature nodes."""
         damping = float(np.einsum("k,ik,ik->", weights, v, self.C @ v))
         ag = w[0] + w[1] * nodes
         work = -float((weights * ag) @ (self.masses @ v))
@@ -614,25 +617,32 @@ class TaylorSegment(ModalSegment):
     :class:`ModalSegment` (bit for bit the results of earlier versions).
     """
 
-    __slots__ = ("length", "_taylor", "_amp0", "_ramp")
+    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0")
 
     def __init__(self, cfg: Configuration, z0: np.ndarray, w: np.ndarray, length: float):
         super().__init__(cfg, z0, w)
         self.length = float(length)
-        q0, beta1 = self.q0, self.beta1
-        dq0 = cfg.lam * q0 + self.beta0
+        dq0 = self._dq0 = cfg.lam * self.q0 + self.beta0
         # the start needs no evaluation: what modal_at(0) gives, bit for bit
-        self._memo[0.0] = (q0, dq0)
+        self._memo[0.0] = (self.q0, dq0)
         self._amp0 = np.abs(dq0)
-        self._ramp = np.abs(beta1)
-        rho = cfg.rate * self.length
-        self._taylor = (_taylor_columns(cfg.lam, q0, dq0, beta1, _taylor_degree(rho))
-                        if rho <= TAYLOR_MAX_SPAN else None)
+        self._ramp = np.abs(self.beta1)
+        self._taylor = None                 # the columns, made at their first use
+
+    def taylor(self) -> np.ndarray | None:
+        """``(2n, K + 1)``: column k is ``q^(k)(0) / k!``; None for a long segment."""
+        if self._taylor is None:
+            rho = self.cfg.rate * self.length
+            if rho > TAYLOR_MAX_SPAN:
+                return None
+            self._taylor = _taylor_columns(self.cfg.lam, self.q0, self._dq0, self.beta1, _taylor_degree(rho))
+        return self._taylor
 
     def evaluator(self, c_modal: np.ndarray, count: int):
-        if self._taylor is None or count > _TAYLOR_DERIVATIVES + 1:
+        columns = self.taylor() if count <= _TAYLOR_DERIVATIVES + 1 else None
+        if columns is None:
             return super().evaluator(c_modal, count)
-        a = (c_modal @ self._taylor).real.tolist()     # Taylor coefficients of g at 0
+        a = (c_modal @ columns).real.tolist()           # Taylor coefficients of g at 0
         polys = [a[::-1]]                               # highest degree first, for Horner
         for _ in range(1, count):
             a = [k * a[k] for k in range(1, len(a))]
@@ -647,6 +657,29 @@ class TaylorSegment(ModalSegment):
                 out.append(v)
             return out
         return values
+
+    def state(self, s: float) -> np.ndarray:
+        """Real state ``z(s)`` (``0 <= s <= length``)."""
+        columns = self.taylor()
+        if columns is None:
+            return self.cfg.state_at(self.q0, self.beta0, self.beta1, s)
+        powers = np.cumprod(np.full(columns.shape[1], s))
+        powers[1:] = powers[:-1]
+        powers[0] = 1.0
+        return (self.cfg.V @ (columns @ powers)).real
+
+    def energies(self, w: np.ndarray, length: float):
+        """:meth:`Configuration.energies` over ``[0, length]`` (``length <= self.length``)."""
+        cfg = self.cfg
+        columns = self.taylor()
+        if columns is None:
+            return cfg.energies(self.q0, self.beta0, self.beta1, w, length)
+        nodes, weights = cfg.chunk_nodes(length)
+        powers = np.ones((columns.shape[1], nodes.size))
+        powers[1:] = nodes
+        np.cumprod(powers, axis=0, out=powers)
+        v = (cfg.V[cfg.n:] @ (columns @ powers)).real
+        return cfg.quadrature(v, nodes, weights, w)
 
     def bound(self, c_modal_abs: np.ndarray, order: int, s: float, length: float) -> float:
         return float(c_modal_abs @ self._powers(order, s + length))
@@ -679,15 +712,17 @@ def _taylor_degree(rho: float) -> int:
 
 
 def _taylor_columns(lam, q0, dq0, beta1, degree: int) -> np.ndarray:
-    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`)."""
+    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`):
+    ``(lam^(k-1) q'(0) + lam^(k-2) beta1) / k!`` for ``k >= 2``, from the powers
+    ``P[:, j] = lam^j / j!`` (one cumulative product)."""
+    k = np.arange(2, degree + 1, dtype=float)
+    P = np.ones((lam.size, degree), dtype=complex)
+    P[:, 1:] = lam[:, None] / np.arange(1, degree, dtype=float)
+    np.cumprod(P, axis=1, out=P)
     cols = np.empty((lam.size, degree + 1), dtype=complex)
     cols[:, 0] = q0
     cols[:, 1] = dq0
-    prev = dq0
-    for k in range(2, degree + 1):
-        # q^(k) / k! = (lam q^(k-1) / (k-1)! + [k == 2] beta1) / k
-        prev = (lam * prev + beta1) / k if k == 2 else lam * prev / k
-        cols[:, k] = prev
+    cols[:, 2:] = (dq0[:, None] * P[:, 1:] + beta1[:, None] * (P[:, :-1] / (k - 1.0))) / k
     return cols
 
 

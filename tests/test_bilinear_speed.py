@@ -33,7 +33,7 @@ def test_taylor_segment_values_equal_the_modal_solution(rho):
         w = np.concatenate([[rng.normal() * 3.0, rng.normal() * 300.0], rng.normal(size=n) * 1e5])
         modal = ModalSegment(cfg, z0, w)
         taylor = TaylorSegment(cfg, z0, w, length)
-        assert taylor._taylor is not None
+        assert taylor.taylor() is not None
         for row in range(n, 3 * n):          # drifts and accelerations
             c = cfg.peak_modal[row]
             f = taylor.evaluator(c, 3)
@@ -79,6 +79,29 @@ def test_a_long_segment_falls_back_to_the_modal_form():
     z0 = np.full(2 * n, 0.01)
     w = np.zeros(n + 2)
     seg = TaylorSegment(cfg, z0, w, 2.5 / cfg.rate)
-    assert seg._taylor is None
+    assert seg.taylor() is None
     c = cfg.peak_modal[n]
     assert seg.evaluator(c, 3)(0.5 / cfg.rate) == ModalSegment(cfg, z0, w).derivatives(c, 0.5 / cfg.rate, 3)
+
+
+@pytest.mark.parametrize("rho", [0.1, 1.0, 2.0])
+def test_taylor_segment_state_and_energies_equal_the_modal_ones(rho):
+    """The state inside a segment and its energy integrals (what an event's partial segments
+    use) from the Taylor columns against the modal solution, to round-off of their magnitudes."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = rho / cfg.rate
+    rng = np.random.default_rng(3)
+    z0 = rng.normal(size=2 * n) * np.concatenate([np.full(n, 0.02), np.full(n, 0.2)])
+    w = np.concatenate([[2.0, -150.0], rng.normal(size=n) * 1e5])
+    seg = TaylorSegment(cfg, z0, w, length)
+    q0, b0, b1 = cfg.modal(z0, w)
+    for s in (0.0, 0.3 * length, length):
+        want = cfg.state_at(q0, b0, b1, s)
+        scale = np.abs(cfg.V) @ np.abs(cfg.modal_at(q0, b0, b1, s))
+        assert np.all(np.abs(seg.state(s) - want) <= 1e-13 * scale)
+    for stop in (0.4 * length, length):
+        got = seg.energies(w, stop)
+        want = cfg.energies(q0, b0, b1, w, stop)
+        for g, wv in zip(got, want):
+            assert g == pytest.approx(wv, rel=1e-12)
