@@ -496,6 +496,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                         up_flags = elastic & (e0 + reach >= self.dy)
                         down_flags = elastic & (e0 - reach <= -self.dy)
                         unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                        quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
+                                                         ag1, rem, up_flags, down_flags, unload_flags)
                 else:
                     quiet = True
                 if quiet and not peak_flags.any():
@@ -527,6 +529,36 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if events > MAX_EVENTS_PER_STEP:
                     break
         return events
+
+    def _second_order_quiet(self, cfg, state, elastic, e0, rate0, scan_vector, ag1, length,
+                            up_flags, down_flags, unload_flags) -> bool:
+        """The event test of tier 1 to second order, for a segment the first-order bound could
+        not clear: True if no storey can change state in ``[0, length]``; otherwise the flags
+        (changed in place) keep only the storeys this test cannot clear either.
+
+        An elastic storey's elastic deformation ``e = d - s`` stays within ``e0 + e'0 t`` (its
+        extremes at the ends) plus ``max|d''| t^2 / 2``; a yielding storey's ``mode d'`` stays
+        above ``mode (d'0 + d''0 t) - max|d'''| t^2 / 2``, a concave bound whose minimum is at an
+        end (:meth:`Configuration.drift_curvature_rows` bounds ``d''`` and ``d'''``).  The margins
+        (``1e-12`` of ``dy`` and of ``|d'0|``) cover the round-off of these few operations.
+        """
+        n = self.n
+        M, Ra, Rb = cfg.drift_curvature_rows()
+        bound = M @ np.abs(scan_vector[-4 * n:])
+        if ag1 != 0.0:
+            bound += abs(ag1) * (length * Ra + Rb)
+        half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
+        rem2 = bound[:n] * half
+        e1 = e0 + rate0 * length
+        limit = self.dy * (1.0 - 1e-12)
+        up_flags &= np.maximum(e0, e1) + rem2 >= limit
+        down_flags &= np.minimum(e0, e1) - rem2 <= -limit
+        m = 3 * n                                # rows of each block of the scan vector; block 4: g''(0)
+        mode = state.mode
+        g0 = mode * rate0
+        g1 = g0 + mode * scan_vector[4 * m + n:4 * m + 2 * n] * length - bound[n:] * half
+        unload_flags &= np.minimum(g0, g1) <= 1e-12 * np.abs(g0)
+        return not (up_flags.any() or down_flags.any() or unload_flags.any())
 
     def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
         """End a segment at ``z1`` (a fresh array: the state keeps views of it).  ``yielding``

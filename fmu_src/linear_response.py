@@ -433,6 +433,28 @@ class Configuration:
         # acting on [|Re q'(0)|; |Im q'(0)|] (their sum bounds |q'(0)|): no square root per step
         return np.ascontiguousarray(np.hstack([change, change])), ramp_change
 
+    def drift_curvature_rows(self):
+        """``(M, Ra, Rb)`` for second-order bounds of the storey drifts ``d = D u`` over a segment.
+
+        With ``a = [|Re W z'(0)|; |Im W z'(0)|]`` (their sum bounds ``|q'(0)|``), ``M @ a +
+        |ag1| (L Ra + Rb)``, times ``e^{max(Re lam, 0) L}``, bounds the maxima of ``|d''|`` (first
+        n) and ``|d'''|`` (last n) over ``[0, L]``: ``q'' = lam q' + beta1`` and ``|q_j'(t)| <=
+        (|q_j'(0)| + t |beta1_j|) e^{max(Re lam, 0) t}`` give ``|q_j''| <= |lam_j| (|q_j'(0)| + L
+        |beta1_j|) + |beta1_j|`` and ``|q_j'''| <= |lam_j| |q_j''|``, with ``|beta1| = |ag1|``
+        times :attr:`ramp_abs`.  Made once per configuration.
+        """
+        rows = getattr(self, "_drift_curvature", None)
+        if rows is None:
+            n = self.n
+            DV = np.abs(self.watch_rows[n:2 * n] @ self.V)                      # (n, 2n)
+            lam = self.lam_abs
+            M2, M3 = DV * lam, DV * (lam * lam)
+            M = np.ascontiguousarray(np.vstack([np.hstack([M2, M2]), np.hstack([M3, M3])]))
+            Ra = np.concatenate([M2 @ self.ramp_abs, M3 @ self.ramp_abs])       # times L
+            Rb = np.concatenate([DV @ self.ramp_abs, M2 @ self.ramp_abs])
+            rows = self._drift_curvature = (M, Ra, Rb)
+        return rows
+
     def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
         """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
         n = self.n
