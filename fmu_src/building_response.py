@@ -266,14 +266,45 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
         self._inv_m = 1.0 / self.masses
+        # the bilinear law's constants, as hysteresis.py's functions compute them (bit for bit)
+        self._elastic_k = (1.0 - self.alpha) * self.k       # stiffness of the plastic element
+        self._hard_k = self.alpha * self.k                  # the hardening spring
+        self._law_memo = None
+        self._shear_memo = None
 
     # -- bilinear storey state -----------------------------------------------------------------
+    def _law_facts(self, mode: np.ndarray):
+        """``(mode, yielding mask, any yielding, q of the yielding storeys, (1 - alpha) Fy mode,
+        mode dy)`` of a mode array, remembered for the array object last seen (a state's mode is
+        replaced, never changed in place).  ``q`` as :func:`bilinear_plastic_force` computes it."""
+        memo = self._law_memo
+        if memo is None or memo[0] is not mode:
+            yielding = mode != 0
+            memo = self._law_memo = (mode, yielding, bool(yielding.any()), mode * (1.0 - self.alpha) * self.fy,
+                                     (1.0 - self.alpha) * self.fy * mode, mode * self.dy)
+        return memo
+
+    def _plastic_force(self, state, d):
+        """:func:`bilinear_plastic_force` of a state, bit for bit, with the constants made once."""
+        _, yielding, _, q_yield, _, _ = self._law_facts(state.mode)
+        return np.where(yielding, q_yield, self._elastic_k * (d - state.slip))
+
+    def _shear_of(self, state, d):
+        """``(V, q)`` of a state with drifts ``d``, remembered for the last state's arrays (a
+        step publishes V, and the reading of the derived outputs asks for it again)."""
+        memo = self._shear_memo
+        if memo is not None and memo[0] is state.u and memo[1] is state.mode and memo[2] is state.slip:
+            return memo[3], memo[4]
+        q = self._plastic_force(state, d)
+        V = self._hard_k * d + q
+        self._shear_memo = (state.u, state.mode, state.slip, V, q)
+        return V, q
+
     def storey_shear(self, state):
         d = _drift(state.u)
         if not self.hysteresis.inelastic:
             return self.k * d
-        return self.alpha * self.k * d + bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip,
-                                                                state.mode)
+        return self._shear_of(state, d)[0].copy()
 
     def strain_energy(self, state):
         if not self.hysteresis.inelastic:
@@ -283,10 +314,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def _shear_and_strain(self, state, d):
         if not self.hysteresis.inelastic:
             return super()._shear_and_strain(state, d)
-        q = bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip, state.mode)
-        hard = self.alpha * self.k * d
-        strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / ((1.0 - self.alpha) * self.k)))
-        return hard + q, strain
+        V, q = self._shear_of(state, d)
+        hard = self._hard_k * d
+        strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / self._elastic_k))
+        return V.copy(), strain
 
     def configuration(self, mode: np.ndarray) -> Configuration:
         """The linear system of a yield pattern (cached; Rayleigh/modal C stays the initial one)."""
@@ -577,12 +608,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """The yielding storeys from ``state.u`` to ``u1``: a yielding storey dissipates
         ``(1 - alpha) Fy`` per unit of slip; its drift is monotonic in the direction of mode over
         the segment (unloading is an event), its slip follows the drift."""
-        yielding = state.mode != 0
-        if yielding.any():
+        _, yielding, any_yielding, _, work, offset = self._law_facts(state.mode)
+        if any_yielding:
             d0 = _drift(state.u)
             d1 = _drift(u1)
-            state.E_hysteretic += float(np.sum(((1.0 - self.alpha) * self.fy * state.mode * (d1 - d0))[yielding]))
-            state.slip = np.where(yielding, d1 - state.mode * self.dy, state.slip)
+            state.E_hysteretic += float(work @ (d1 - d0))      # elastic storeys: mode 0
+            state.slip = np.where(yielding, d1 - offset, state.slip)
 
     def _switch(self, state, storey: int, kind: int):
         """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
