@@ -267,6 +267,9 @@ class Configuration:
         self.lam = lam
         self.V = V
         self.W = _inverse(V, elastic)
+        # the building's elastic configuration keeps the arithmetic of earlier versions (a linear
+        # building's results bit for bit); the others may sum in another order
+        self.legacy_arithmetic = bool(elastic)
         self.lam_abs = np.abs(lam)
         self.lam2 = self.lam_abs ** 2
         self.lam3 = self.lam_abs ** 3
@@ -302,6 +305,7 @@ class Configuration:
         self._exact: dict[float, SegmentMap] = {}      # the same maps by the exact length asked
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
+        self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
 
     # -- evaluation -------------------------------------------------------------------------
     def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
@@ -357,6 +361,10 @@ class Configuration:
         work = -float((weights * ag) @ (self.masses @ v))
         return damping, work
 
+    def has_map(self, length: float) -> bool:
+        """Whether :meth:`segment_map` of this length is cached (it would not be built)."""
+        return length in self._exact or float(f"{length:.12g}") in self._maps
+
     def segment_map(self, length: float) -> SegmentMap:
         """Real matrices of a segment of this length, cached (see :class:`SegmentMap`)."""
         found = self._exact.get(length)
@@ -388,17 +396,27 @@ class Configuration:
         e, p1, p2 = phi_functions(x)                                          # (2n, K)
         modal = (e[:, :, None] * Wy[:, None, :] + (nodes * p1)[:, :, None] * B0y[:, None, :]
                  + (nodes * nodes * p2)[:, :, None] * B1y[:, None, :])        # (2n, K, size)
-        vel = np.einsum("ij,jks->kis", self.V[n:], modal).real                 # (K, n, size)
+        K_nodes = nodes.size
+        if self.legacy_arithmetic:
+            vel = np.einsum("ij,jks->kis", self.V[n:], modal).real                 # (K, n, size)
+        else:
+            # the same sums by matrix products (BLAS): 0.3 ms instead of 1.2 ms for 15 storeys,
+            # at every new yield pattern; the elastic configuration keeps the einsum (bit for bit)
+            vel = (self.V[n:] @ modal.reshape(2 * n, K_nodes * size)).real.reshape(n, K_nodes, size)
+            vel = vel.transpose(1, 0, 2)
         # sum_k w_k vel_k' C vel_k as one matrix product over the stacked nodes (a 4-operand
         # einsum without a contraction order took ~100 ms for 15 storeys, at every new yield pattern)
-        K_nodes = nodes.size
         weighted = (vel * weights[:, None, None]).reshape(K_nodes * n, size)
         damping = weighted.T @ np.matmul(self.C, vel).reshape(K_nodes * n, size)
-        mv = np.einsum("i,kis->ks", self.masses, vel)                          # (K, size)
         ag_row = np.zeros((nodes.size, size))
         ag_row[:, 2 * n] = 1.0
         ag_row[:, 2 * n + 1] = nodes
-        work = -np.einsum("k,ks,kt->st", weights, mv, ag_row)
+        if self.legacy_arithmetic:
+            mv = np.einsum("i,kis->ks", self.masses, vel)                          # (K, size)
+            work = -np.einsum("k,ks,kt->st", weights, mv, ag_row)
+        else:
+            mv = np.matmul(self.masses, vel)                                       # (K, size)
+            work = -((mv * weights[:, None]).T @ ag_row)
         damping = 0.5 * (damping + damping.T)
         work = 0.5 * (work + work.T)
         start = np.hstack([self.watch_rows, np.zeros((4 * n, n + 2))])

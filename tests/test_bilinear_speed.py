@@ -162,3 +162,50 @@ def test_second_order_event_test_never_clears_a_segment_with_an_event(monkeypatc
         cleared += quiet
     assert len(calls) > 100 and events > 10      # the test meets real events
     assert cleared > 0.2 * len(calls)
+
+
+def test_segment_maps_of_yield_patterns_equal_the_einsum_ones():
+    """A yield pattern's segment map sums by matrix products; the elastic configuration keeps the
+    einsum of earlier versions: the same matrices to round-off (1e-14 of their largest entry)."""
+    b, cfg = yielding_configuration(n=8, T1=1.0, yielded=(0, 4))
+    legacy = Configuration(b.masses, b.C, cfg.tangent, elastic=False)
+    legacy.legacy_arithmetic = True
+    assert not cfg.legacy_arithmetic
+    for length in (0.01, 0.0137, 0.16):
+        a, c = cfg.segment_map(length), legacy.segment_map(length)
+        for name in ("state", "damping", "input", "stacked"):
+            x, y = getattr(a, name), getattr(c, name)
+            assert np.max(np.abs(x - y)) <= 1e-14 * np.max(np.abs(y)), (length, name)
+
+
+@pytest.mark.parametrize("n", [3, 8])
+def test_ad_hoc_and_mapped_segments_give_the_same_run(monkeypatch, n):
+    """Brief yield patterns go through ad hoc segments until MAP_AFTER_SEGMENTS; with every
+    pattern mapped at once, or never, a yielding run (ductility > 2) ends in the same state,
+    energies and peaks to round-off, with the same events."""
+    import fmu_src.building_response as response
+    from fmu_src.ground_records import load_record
+    from fmu_src.hysteresis import StoreyHysteresis
+    from fmu_src.record_knots import step_knots
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * 9.80665 / rec.pga)
+    b = ShearBuilding.from_period(0.3 * n ** 0.5, [3e5] * n, np.linspace(1.0, 0.6, n), 0.05)
+    fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
+    runs = []
+    for after in (0, 10 ** 9):
+        monkeypatch.setattr(response, "MAP_AFTER_SEGMENTS", after)
+        it = response.integrator_for(b, StoreyHysteresis("bilinear", fy, 0.05))
+        st = it.initial_state(np.zeros(n), np.zeros(n))
+        events = 0
+        for i in range(200):
+            kt, ka = step_knots(rec, 0.02 * i, 0.02 * (i + 1))
+            events += it.advance(st, kt - 0.02 * i, ka, np.zeros(n)).events
+        it.resolve_peaks(st)
+        runs.append((st, events))
+    (a, ea), (c, ec) = runs
+    assert ea == ec > 10
+    assert float(np.max(a.peak_drift / (fy / b.stiffnesses))) > 2.0
+    np.testing.assert_allclose(a.u, c.u, rtol=0, atol=1e-12 * np.abs(c.u).max())
+    np.testing.assert_allclose(a.peaks, c.peaks, rtol=1e-9)
+    for key in ("E_input", "E_damping", "E_hysteretic"):
+        assert getattr(a, key) == pytest.approx(getattr(c, key), rel=1e-11)
