@@ -657,7 +657,7 @@ class TaylorSegment(ModalSegment):
     :class:`ModalSegment` (bit for bit the results of earlier versions).
     """
 
-    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0")
+    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds")
 
     def __init__(self, cfg: Configuration, z0: np.ndarray, w: np.ndarray, length: float):
         super().__init__(cfg, z0, w)
@@ -668,6 +668,7 @@ class TaylorSegment(ModalSegment):
         self._amp0 = np.abs(dq0)
         self._ramp = np.abs(self.beta1)
         self._taylor = None                 # the columns, made at their first use
+        self._bounds = {}                   # see _bound_parts
 
     def taylor(self) -> np.ndarray | None:
         """``(2n, K + 1)``: column k is ``q^(k)(0) / k!``; None for a long segment."""
@@ -722,17 +723,35 @@ class TaylorSegment(ModalSegment):
         return cfg.quadrature(v, nodes, weights, w)
 
     def bound(self, c_modal_abs: np.ndarray, order: int, s: float, length: float) -> float:
-        return float(c_modal_abs @ self._powers(order, s + length))
+        end = s + length
+        parts = self._bound_parts(c_modal_abs)
+        return math.exp(self.cfg.growth_rate * end) * (parts[order][0] + end * parts[order][1]) + parts[order][2]
 
     def bounds45(self, c_modal_abs: np.ndarray, s: float, length: float) -> tuple[float, float]:
         end = s + length
-        return float(c_modal_abs @ self._powers(4, end)), float(c_modal_abs @ self._powers(5, end))
+        parts = self._bound_parts(c_modal_abs)
+        growth = math.exp(self.cfg.growth_rate * end)
+        (a4, r4, c4), (a5, r5, c5) = parts[4], parts[5]
+        return growth * (a4 + end * r4) + c4, growth * (a5 + end * r5) + c5
 
-    def _powers(self, order: int, end: float) -> np.ndarray:
-        """Per mode, a bound of ``|q_j^(order)|`` over ``[0, end]`` (``order >= 2``)."""
-        cfg = self.cfg
-        amp = (self._amp0 + end * self._ramp) * math.exp(cfg.growth_rate * end)
-        return cfg.lam_abs ** (order - 1) * amp + cfg.lam_abs ** (order - 2) * self._ramp
+    def _bound_parts(self, c_modal_abs: np.ndarray) -> dict:
+        """The bounds of ``|c' z^(k)|`` over ``[0, end]`` (k = 2..5) as ``e^{max(Re lam, 0) end}
+        (a_k + end r_k) + c_k``: per mode ``|q_j^(k)| <= |lam_j|^(k-1) (|q_j'(0)| + end
+        |beta1_j|) e^{...} + |lam_j|^(k-2) |beta1_j|``, summed with the weights ``|c_j|`` once
+        per function (a search asks for them on every sub-interval; the weights' array is
+        kept, so that its id is not reused while cached)."""
+        key = id(c_modal_abs)
+        hit = self._bounds.get(key)
+        if hit is None or hit[0] is not c_modal_abs:
+            cfg = self.cfg
+            lam = cfg.lam_abs
+            weights = c_modal_abs
+            powers = [np.ones_like(lam), lam, cfg.lam2, cfg.lam3, cfg.lam4]
+            amp0 = weights @ np.column_stack([p * self._amp0 for p in powers])
+            ramp = weights @ np.column_stack([p * self._ramp for p in powers])
+            parts = {k: (float(amp0[k - 1]), float(ramp[k - 1]), float(ramp[k - 2])) for k in range(2, 6)}
+            hit = self._bounds[key] = (c_modal_abs, parts)
+        return hit[1]
 
 
 TAYLOR_MAX_SPAN = 2.0        # max|lam| L up to which TaylorSegment evaluates by polynomial
