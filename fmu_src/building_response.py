@@ -27,11 +27,19 @@ step where nothing happens costs a few vector operations:
 1. a bound on how far every watched function can move in the segment (precomputed per
    configuration and segment length, :meth:`Configuration.change_bounds`, applied to
    ``|z'(0)|``) clears most segments at once: no storey can reach its limit, no function can
-   pass its running peak;
+   pass its running peak; for the storeys it leaves, the same test to second order (the drift
+   rates and accelerations with a bound of the next derivative,
+   :meth:`ExactPiecewiseLinear._second_order_quiet`);
 2. for the functions it does not clear, cubic Hermite interpolation through the end values and
    slopes with a bound of the fourth derivative (:class:`~fmu_src.linear_response.Scan`);
-3. for the few left, bisection and bracketed Newton on the modal solution
-   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`).
+3. for the few left, bisection and bracketed Newton on the exact solution
+   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`): in
+   modal form for a linear building, on each function's Taylor polynomial (Python floats,
+   :class:`~fmu_src.linear_response.TaylorSegment`) for a yielding one.
+
+A yielding building meets many stiffness configurations (yield patterns), most of them for a
+few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
+``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length serves them.
 
 Bouc-Wen peaks are located on the dense output of every Runge-Kutta step where the
 derivative changes sign.  The absolute acceleration is the building's own, ``M^-1 (f - C v -
