@@ -258,15 +258,25 @@ class Configuration:
         A[n:, n:] = -self.C / m[:, None]
         self.A = A
         lam, V = eig(A)
-        cond = np.linalg.cond(V)
-        if not (math.isfinite(cond) and cond <= MAX_CONDITION):
+        W = None
+        if not elastic:
+            # cond_2(V) <= |V|_F |W|_F: a basis that this cheap bound accepts needs no SVD (most
+            # yield patterns; the SVD was a third of a configuration's cost for 15 storeys)
+            try:
+                W = _inverse(V, elastic)
+            except np.linalg.LinAlgError:
+                W = None
+            if W is not None and not (np.linalg.norm(V) * np.linalg.norm(W) <= MAX_CONDITION):
+                W = None
+        cond = np.linalg.cond(V) if W is None else 0.0
+        if W is None and not (math.isfinite(cond) and cond <= MAX_CONDITION):
             raise ValueError(
                 f"the storey stiffness configuration {kt.tolist()} N/m gives a defective or nearly "
                 f"defective state matrix (eigenvector condition {cond:.3g} > {MAX_CONDITION:g}); "
                 f"an undamped mechanism (zeta = 0 with alpha = 0) has this: give zeta > 0 or alpha > 0")
         self.lam = lam
         self.V = V
-        self.W = _inverse(V, elastic)
+        self.W = _inverse(V, elastic) if W is None else W
         # the building's elastic configuration keeps the arithmetic of earlier versions (a linear
         # building's results bit for bit); the others may sum in another order
         self.legacy_arithmetic = bool(elastic)
@@ -684,6 +694,18 @@ class TaylorSegment(ModalSegment):
         if columns is None:
             return super().evaluator(c_modal, count)
         a = (c_modal @ columns).real.tolist()           # Taylor coefficients of g at 0
+        if count == 3:
+            # what the searches ask: g, g', g'' in one Horner pass (value, slope, half curvature)
+            highest_first = a[::-1]
+
+            def three(s):
+                v = d1 = d2 = 0.0
+                for ck in highest_first:
+                    d2 = d2 * s + d1
+                    d1 = d1 * s + v
+                    v = v * s + ck
+                return [v, d1, 2.0 * d2]
+            return three
         polys = [a[::-1]]                               # highest degree first, for Horner
         for _ in range(1, count):
             a = [k * a[k] for k in range(1, len(a))]
