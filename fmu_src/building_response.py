@@ -27,11 +27,19 @@ step where nothing happens costs a few vector operations:
 1. a bound on how far every watched function can move in the segment (precomputed per
    configuration and segment length, :meth:`Configuration.change_bounds`, applied to
    ``|z'(0)|``) clears most segments at once: no storey can reach its limit, no function can
-   pass its running peak;
+   pass its running peak; for the storeys it leaves, the same test to second order (the drift
+   rates and accelerations with a bound of the next derivative,
+   :meth:`ExactPiecewiseLinear._second_order_quiet`);
 2. for the functions it does not clear, cubic Hermite interpolation through the end values and
    slopes with a bound of the fourth derivative (:class:`~fmu_src.linear_response.Scan`);
-3. for the few left, bisection and bracketed Newton on the modal solution
-   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`).
+3. for the few left, bisection and bracketed Newton on the exact solution
+   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`): in
+   modal form for a linear building, on each function's Taylor polynomial (Python floats,
+   :class:`~fmu_src.linear_response.TaylorSegment`) for a yielding one.
+
+A yielding building meets many stiffness configurations (yield patterns), most of them for a
+few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
+``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length serves them.
 
 Bouc-Wen peaks are located on the dense output of every Runge-Kutta step where the
 derivative changes sign.  The absolute acceleration is the building's own, ``M^-1 (f - C v -
@@ -51,8 +59,8 @@ from scipy.optimize import brentq
 
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, first_root,
-                              hermite_range_scalar, max_abs)
+from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, TaylorSegment,
+                              first_root, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -66,6 +74,7 @@ MAX_EVENTS_PER_STEP = 10000  # a bound on yield/unloading events in one communic
 MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
 MAX_PLANS = 16              # segment maps with a batch plan (ExactPiecewiseLinear._batch_plan) per building
 MAX_CHAINS = 8              # interval counts with a chain (ExactPiecewiseLinear._chain) per plan
+MAP_AFTER_SEGMENTS = 2      # ad hoc segments of a yield pattern before its segment map is built
 # Bouc-Wen's work per communication step.  The span: the same bound as the exact integrator's
 # quadrature (MAX_CHUNKS chunks of CHUNK_RATE / |lambda|), |lambda| h <= 8192, about 1300 periods
 # of the fastest elastic mode; a longer step (h = 1e6 s ran for minutes) is refused before any
@@ -274,14 +283,45 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
         self._inv_m = 1.0 / self.masses
         self._plans: dict[int, tuple] = {}
+        # the bilinear law's constants, as hysteresis.py's functions compute them (bit for bit)
+        self._elastic_k = (1.0 - self.alpha) * self.k       # stiffness of the plastic element
+        self._hard_k = self.alpha * self.k                  # the hardening spring
+        self._law_memo = None
+        self._shear_memo = None
 
     # -- bilinear storey state -----------------------------------------------------------------
+    def _law_facts(self, mode: np.ndarray):
+        """``(mode, yielding mask, any yielding, q of the yielding storeys, (1 - alpha) Fy mode,
+        mode dy)`` of a mode array, remembered for the array object last seen (a state's mode is
+        replaced, never changed in place).  ``q`` as :func:`bilinear_plastic_force` computes it."""
+        memo = self._law_memo
+        if memo is None or memo[0] is not mode:
+            yielding = mode != 0
+            memo = self._law_memo = (mode, yielding, bool(yielding.any()), mode * (1.0 - self.alpha) * self.fy,
+                                     (1.0 - self.alpha) * self.fy * mode, mode * self.dy)
+        return memo
+
+    def _plastic_force(self, state, d):
+        """:func:`bilinear_plastic_force` of a state, bit for bit, with the constants made once."""
+        _, yielding, _, q_yield, _, _ = self._law_facts(state.mode)
+        return np.where(yielding, q_yield, self._elastic_k * (d - state.slip))
+
+    def _shear_of(self, state, d):
+        """``(V, q)`` of a state with drifts ``d``, remembered for the last state's arrays (a
+        step publishes V, and the reading of the derived outputs asks for it again)."""
+        memo = self._shear_memo
+        if memo is not None and memo[0] is state.u and memo[1] is state.mode and memo[2] is state.slip:
+            return memo[3], memo[4]
+        q = self._plastic_force(state, d)
+        V = self._hard_k * d + q
+        self._shear_memo = (state.u, state.mode, state.slip, V, q)
+        return V, q
+
     def storey_shear(self, state):
         d = _drift(state.u)
         if not self.hysteresis.inelastic:
             return self.k * d
-        return self.alpha * self.k * d + bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip,
-                                                                state.mode)
+        return self._shear_of(state, d)[0].copy()
 
     def strain_energy(self, state):
         if not self.hysteresis.inelastic:
@@ -291,10 +331,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def _shear_and_strain(self, state, d):
         if not self.hysteresis.inelastic:
             return super()._shear_and_strain(state, d)
-        q = bilinear_plastic_force(self.k, self.fy, self.alpha, d, state.slip, state.mode)
-        hard = self.alpha * self.k * d
-        strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / ((1.0 - self.alpha) * self.k)))
-        return hard + q, strain
+        V, q = self._shear_of(state, d)
+        hard = self._hard_k * d
+        strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / self._elastic_k))
+        return V.copy(), strain
 
     def configuration(self, mode: np.ndarray) -> Configuration:
         """The linear system of a yield pattern (cached; Rayleigh/modal C stays the initial one)."""
@@ -625,7 +665,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             segment = None
             e_damp = e_in = None
             change = None
-            if s == 0.0:
+            if s == 0.0 and (not inelastic or self._worth_a_map(cfg, rem, elastic)):
                 # a whole knot interval or step (a repeated length): one product with the
                 # cached map gives the end state, z'(0), the watched values, the test
                 # quantities and the energy forms
@@ -640,8 +680,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 e_in = float(y @ out[rows + size:])
                 change = smap.change
             else:
-                segment = ModalSegment(cfg, z0, w)
-                z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, rem)
+                # after an event, the rest of the interval, or a yield pattern met only briefly
+                # so far (only a yielding building has either)
+                segment = TaylorSegment(cfg, z0, w, rem)
+                z1 = segment.state(rem)
                 scan_vector = cfg.scan_vector(z0, z1, w, rem)
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
@@ -663,6 +705,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                         up_flags = elastic & (e0 + reach >= self.dy)
                         down_flags = elastic & (e0 - reach <= -self.dy)
                         unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                        quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
+                                                         ag1, rem, up_flags, down_flags, unload_flags)
                 else:
                     quiet = True
                 if quiet and not peak_flags.any():
@@ -672,19 +716,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
             if inelastic:
-                event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags, unload_flags)
+                segment, event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags,
+                                                   unload_flags, segment)
             stop = rem
             if event is not None:
                 stop = event[0]
-                segment = segment or ModalSegment(cfg, z0, w)
                 if stop > 0.0:
-                    z1 = cfg.state_at(segment.q0, segment.beta0, segment.beta1, stop)
+                    z1 = segment.state(stop)
                     scan = Scan(cfg, cfg.scan_vector(z0, z1, w, stop), ag1, stop)
                 e_damp = None
             if stop > 0.0:
                 if e_damp is None:
-                    segment = segment or ModalSegment(cfg, z0, w)
-                    e_damp, e_in = cfg.energies(segment.q0, segment.beta0, segment.beta1, w, stop)
+                    e_damp, e_in = segment.energies(w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
@@ -695,6 +738,49 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if events > MAX_EVENTS_PER_STEP:
                     break
         return events
+
+    @staticmethod
+    def _worth_a_map(cfg, length, elastic) -> bool:
+        """Whether an interval of a yielding building's configuration goes through the cached
+        segment map of its length (built now if missing) rather than ad hoc.  A map costs about
+        as much as ten ad hoc segments (15 storeys: 1.4 ms against 0.1-0.2 ms, loaded), and in a
+        tall building most yield patterns last a few intervals (kasai_maison_inelastic: 227
+        patterns, 85 of them met in one or two intervals): a pattern gets its map from its
+        ``MAP_AFTER_SEGMENTS + 1``-th segment on; the elastic one at once."""
+        if elastic.all() or cfg.has_map(length):
+            return True
+        cfg.segments_without_map += 1
+        return cfg.segments_without_map > MAP_AFTER_SEGMENTS
+
+    def _second_order_quiet(self, cfg, state, elastic, e0, rate0, scan_vector, ag1, length,
+                            up_flags, down_flags, unload_flags) -> bool:
+        """The event test of tier 1 to second order, for a segment the first-order bound could
+        not clear: True if no storey can change state in ``[0, length]``; otherwise the flags
+        (changed in place) keep only the storeys this test cannot clear either.
+
+        An elastic storey's elastic deformation ``e = d - s`` stays within ``e0 + e'0 t`` (its
+        extremes at the ends) plus ``max|d''| t^2 / 2``; a yielding storey's ``mode d'`` stays
+        above ``mode (d'0 + d''0 t) - max|d'''| t^2 / 2``, a concave bound whose minimum is at an
+        end (:meth:`Configuration.drift_curvature_rows` bounds ``d''`` and ``d'''``).  The margins
+        (``1e-12`` of ``dy`` and of ``|d'0|``) cover the round-off of these few operations.
+        """
+        n = self.n
+        M, Ra, Rb = cfg.drift_curvature_rows()
+        bound = M @ np.abs(scan_vector[-4 * n:])
+        if ag1 != 0.0:
+            bound += abs(ag1) * (length * Ra + Rb)
+        half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
+        rem2 = bound[:n] * half
+        e1 = e0 + rate0 * length
+        limit = self.dy * (1.0 - 1e-12)
+        up_flags &= np.maximum(e0, e1) + rem2 >= limit
+        down_flags &= np.minimum(e0, e1) - rem2 <= -limit
+        m = 3 * n                                # rows of each block of the scan vector; block 4: g''(0)
+        mode = state.mode
+        g0 = mode * rate0
+        g1 = g0 + mode * scan_vector[4 * m + n:4 * m + 2 * n] * length - bound[n:] * half
+        unload_flags &= np.minimum(g0, g1) <= 1e-12 * np.abs(g0)
+        return not (up_flags.any() or down_flags.any() or unload_flags.any())
 
     def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
         """End a segment at ``z1`` (a fresh array: the state keeps views of it).  ``yielding``
@@ -713,12 +799,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """The yielding storeys from ``state.u`` to ``u1``: a yielding storey dissipates
         ``(1 - alpha) Fy`` per unit of slip; its drift is monotonic in the direction of mode over
         the segment (unloading is an event), its slip follows the drift."""
-        yielding = state.mode != 0
-        if yielding.any():
+        _, yielding, any_yielding, _, work, offset = self._law_facts(state.mode)
+        if any_yielding:
             d0 = _drift(state.u)
             d1 = _drift(u1)
-            state.E_hysteretic += float(np.sum(((1.0 - self.alpha) * self.fy * state.mode * (d1 - d0))[yielding]))
-            state.slip = np.where(yielding, d1 - state.mode * self.dy, state.slip)
+            state.E_hysteretic += float(work @ (d1 - d0))      # elastic storeys: mode 0
+            state.slip = np.where(yielding, d1 - offset, state.slip)
 
     def _switch(self, state, storey: int, kind: int):
         """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
@@ -734,8 +820,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     # -- events -------------------------------------------------------------------------------
     def _first_event(self, cfg, scan, state, y, rem, xtol, cost, up_flags=None, down_flags=None,
-                     unload_flags=None):
-        """``(time, storey, kind)`` of the first event in [0, rem], or None.
+                     unload_flags=None, segment=None):
+        """``(segment, event)``: the segment's :class:`TaylorSegment` (``segment``, made if None and
+        needed) and ``(time, storey, kind)`` of the first event in [0, rem], or None.
 
         Events: an elastic storey whose plastic element reaches its strength (``|d - s| = dy``;
         kind = the direction) and a yielding storey whose drift velocity changes sign (kind 0).
@@ -768,8 +855,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if lo - B[r, 1] * w4 <= 0.0:
                     candidates.append((i, 0))
         if not candidates:
-            return None
-        segment = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+            return segment, None
+        if segment is None:
+            segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], rem)
         best = None
         D = self._drift_rows
         for i, kind in candidates:
@@ -783,12 +871,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             c_modal = row @ cfg.V
             horizon = rem if best is None else best[0]
             if horizon <= 0.0:
-                return best
+                return segment, best
             cost.root_searches += 1
             t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
             if t is not None and (best is None or t < best[0]):
                 best = (t, int(i), kind)
-        return best
+        return segment, best
 
     # -- peaks --------------------------------------------------------------------------------
     def _peaks(self, cfg, scan, segment, state, y, p, length, xtol, cost, flags=None):
@@ -894,13 +982,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         new = state.peaks.copy()
         atol = self._peak_atol
         segments = {}
+        inelastic = self.hysteresis.inelastic
         for j, bound, key, y, length, xtol in sorted(state.pending, key=lambda e: -e[1]):
             if bound <= new[j] + atol[j]:
                 continue
             cfg = self._configuration_of(key)
             segment = segments.get(id(y))
             if segment is None:
-                segment = segments[id(y)] = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+                # a yielding building's searches run on Taylor polynomials; a linear building
+                # keeps the modal evaluation of earlier versions (bit for bit)
+                segment = segments[id(y)] = (TaylorSegment(cfg, y[:2 * n], y[2 * n:], length) if inelastic
+                                             else ModalSegment(cfg, y[:2 * n], y[2 * n:]))
             offset = y[2 * n + 2 + j - 2 * n] * self._inv_m[j - 2 * n] if j >= 2 * n else 0.0
             cost.peak_searches += 1
             new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,

@@ -1,0 +1,211 @@
+"""The cheap paths of the yielding (bilinear) building's step (issue 18, speed): each must give
+what the general path gives, to round-off, and its bounds must hold."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from fmu_src.linear_response import Configuration, ModalSegment, TaylorSegment
+from fmu_src.shear_building import ShearBuilding
+
+
+def yielding_configuration(n=5, T1=0.4, alpha=0.05, yielded=(1, 3)):
+    """A configuration of a stiff building with some storeys on their post-yield branch."""
+    b = ShearBuilding.from_period(T1, [3e5] * n, np.linspace(1.0, 0.5, n), 0.05)
+    kt = b.stiffnesses.copy()
+    kt[list(yielded)] *= alpha
+    return b, Configuration(b.masses, b.C, kt, elastic=False)
+
+
+@pytest.mark.parametrize("rho", [0.05, 0.5, 1.0, 2.0])
+def test_taylor_segment_values_equal_the_modal_solution(rho):
+    """Values and first two derivatives of drifts and accelerations on a segment with
+    max|lam| L = rho: the Taylor polynomial against the modal evaluation (itself checked against
+    the matrix exponential in test_hysteresis), within 1e-13 of the modal magnitudes of each
+    derivative (round-off: both are exact; a truncated series would miss by rho^(K+1)/(K+1)!)."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = rho / cfg.rate
+    rng = np.random.default_rng(1)
+    for trial in range(5):
+        z0 = rng.normal(size=2 * n) * np.concatenate([np.full(n, 0.02), np.full(n, 0.2)])
+        w = np.concatenate([[rng.normal() * 3.0, rng.normal() * 300.0], rng.normal(size=n) * 1e5])
+        modal = ModalSegment(cfg, z0, w)
+        taylor = TaylorSegment(cfg, z0, w, length)
+        assert taylor.taylor() is not None
+        for row in range(n, 3 * n):          # drifts and accelerations
+            c = cfg.peak_modal[row]
+            f = taylor.evaluator(c, 3)
+            for s in np.linspace(0.0, length, 13):
+                want = modal.derivatives(c, float(s), 3)
+                scale = modal.magnitudes(np.abs(c), float(s), 3)
+                got = f(float(s))
+                for k in range(3):
+                    assert abs(got[k] - want[k]) <= 1e-13 * scale[k] + 1e-300, (trial, row, s, k)
+    # the state at the end from the matrix exponential: the modal solution is the oracle above
+    A = cfg.A
+    z1 = expm(A * length) @ z0
+    assert np.allclose(ModalSegment(cfg, z0, np.zeros(n + 2)).cfg.state_at(
+        *cfg.modal(z0, np.zeros(n + 2)), length), z1, rtol=1e-10, atol=1e-14)
+
+
+def test_taylor_segment_bounds_hold_over_the_segment():
+    """bound(order) and bounds45 over [s, s + w] dominate |g^(order)| sampled densely there (the
+    bounds come from the segment's start, not from s)."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = 1.5 / cfg.rate
+    rng = np.random.default_rng(2)
+    z0 = rng.normal(size=2 * n) * 0.05
+    w = np.array([1.0, 200.0] + [0.0] * n)
+    seg = TaylorSegment(cfg, z0, w, length)
+    modal = ModalSegment(cfg, z0, w)
+    for row in range(3 * n):
+        c = cfg.peak_modal[row]
+        for s, width in ((0.0, length), (0.3 * length, 0.2 * length), (0.7 * length, 0.3 * length)):
+            samples = [modal.derivatives(c, float(t), 6) for t in np.linspace(s, s + width, 41)]
+            for order in (3, 4, 5):
+                bound = seg.bound(np.abs(c), order, s, width)
+                assert max(abs(v[order]) for v in samples) <= bound * (1 + 1e-12)
+            b4, b5 = seg.bounds45(np.abs(c), s, width)
+            assert max(abs(v[4]) for v in samples) <= b4 * (1 + 1e-12)
+            assert max(abs(v[5]) for v in samples) <= b5 * (1 + 1e-12)
+
+
+def test_a_long_segment_falls_back_to_the_modal_form():
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    z0 = np.full(2 * n, 0.01)
+    w = np.zeros(n + 2)
+    seg = TaylorSegment(cfg, z0, w, 2.5 / cfg.rate)
+    assert seg.taylor() is None
+    c = cfg.peak_modal[n]
+    assert seg.evaluator(c, 3)(0.5 / cfg.rate) == ModalSegment(cfg, z0, w).derivatives(c, 0.5 / cfg.rate, 3)
+
+
+@pytest.mark.parametrize("rho", [0.1, 1.0, 2.0])
+def test_taylor_segment_state_and_energies_equal_the_modal_ones(rho):
+    """The state inside a segment and its energy integrals (what an event's partial segments
+    use) from the Taylor columns against the modal solution, to round-off of their magnitudes."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = rho / cfg.rate
+    rng = np.random.default_rng(3)
+    z0 = rng.normal(size=2 * n) * np.concatenate([np.full(n, 0.02), np.full(n, 0.2)])
+    w = np.concatenate([[2.0, -150.0], rng.normal(size=n) * 1e5])
+    seg = TaylorSegment(cfg, z0, w, length)
+    q0, b0, b1 = cfg.modal(z0, w)
+    for s in (0.0, 0.3 * length, length):
+        want = cfg.state_at(q0, b0, b1, s)
+        scale = np.abs(cfg.V) @ np.abs(cfg.modal_at(q0, b0, b1, s))
+        assert np.all(np.abs(seg.state(s) - want) <= 1e-13 * scale)
+    for stop in (0.4 * length, length):
+        got = seg.energies(w, stop)
+        want = cfg.energies(q0, b0, b1, w, stop)
+        for g, wv in zip(got, want):
+            assert g == pytest.approx(wv, rel=1e-12)
+
+
+def test_second_order_event_test_never_clears_a_segment_with_an_event(monkeypatch):
+    """ExactPiecewiseLinear._second_order_quiet in a yielding run (3 storeys, ductility about 3
+    under El Centro at 0.3 g, 10 ms steps) against the modal solution sampled densely: a segment
+    it clears has every elastic storey inside its elastic range and every yielding storey
+    moving in its yield direction throughout; and it clears a good part of the segments that
+    the first-order bound leaves (it is tighter)."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    from fmu_src.ground_records import load_record
+    from fmu_src.hysteresis import StoreyHysteresis
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * 9.80665 / rec.pga)
+    n = 3
+    b = ShearBuilding.from_period(0.5, [3e5] * n, [1.0] * n, 0.05)
+    fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
+    it = ExactPiecewiseLinear(b, StoreyHysteresis("bilinear", fy, 0.05))
+    calls = []
+    plain = ExactPiecewiseLinear._second_order_quiet
+
+    def watched(self, cfg, state, elastic, e0, rate0, scan_vector, ag1, length, up, down, unload):
+        flags = (up.copy(), down.copy(), unload.copy())
+        quiet = plain(self, cfg, state, elastic, e0, rate0, scan_vector, ag1, length, up, down, unload)
+        calls.append((cfg, state.u, state.v, state.mode, state.slip, self._net_force(state, np.zeros(n)),
+                      ag1, length, quiet, flags, (up.copy(), down.copy(), unload.copy())))
+        return quiet
+    monkeypatch.setattr(ExactPiecewiseLinear, "_second_order_quiet", watched)
+    state = it.initial_state(np.zeros(n), np.zeros(n))
+    h = 0.01
+    ags = []
+    for k in range(800):
+        ag = rec.mean_over(k * h, (k + 1) * h)
+        before = len(calls)
+        it.advance(state, (0.0, h), (ag, ag), np.zeros(n))
+        ags.extend([ag] * (len(calls) - before))
+    assert float(np.max(state.peak_drift / it.dy)) > 2.0          # it yields
+    cleared = events = 0
+    for (cfg, u, v, mode, slip, p, ag1, length, quiet, first, second), ag in zip(calls, ags):
+        y = np.concatenate([u, v, [ag, ag1], p])
+        seg = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+        ts = np.linspace(0.0, length, 201)
+        z = cfg.state_at(seg.q0, seg.beta0, seg.beta1, ts)            # (2n, 201)
+        d = np.diff(np.vstack([np.zeros((1, ts.size)), z[:n]]), axis=0)
+        dv = np.diff(np.vstack([np.zeros((1, ts.size)), z[n:]]), axis=0)
+        for i in range(n):
+            if mode[i] == 0:
+                ok = np.all(np.abs(d[i] - slip[i]) < it.dy[i])
+                kept = second[0][i] or second[1][i]
+            else:
+                ok = np.all(mode[i] * dv[i, 1:] > 0.0)
+                kept = second[2][i]
+            if not ok:
+                events += 1
+                assert kept and not quiet, (i, mode)
+        cleared += quiet
+    assert len(calls) > 100 and events > 10      # the test meets real events
+    assert cleared > 0.2 * len(calls)
+
+
+def test_segment_maps_of_yield_patterns_equal_the_einsum_ones():
+    """A yield pattern's segment map sums by matrix products; the elastic configuration keeps the
+    einsum of earlier versions: the same matrices to round-off (1e-14 of their largest entry)."""
+    b, cfg = yielding_configuration(n=8, T1=1.0, yielded=(0, 4))
+    legacy = Configuration(b.masses, b.C, cfg.tangent, elastic=False)
+    legacy.legacy_arithmetic = True
+    assert not cfg.legacy_arithmetic
+    for length in (0.01, 0.0137, 0.16):
+        a, c = cfg.segment_map(length), legacy.segment_map(length)
+        for name in ("state", "damping", "input", "stacked"):
+            x, y = getattr(a, name), getattr(c, name)
+            assert np.max(np.abs(x - y)) <= 1e-14 * np.max(np.abs(y)), (length, name)
+
+
+@pytest.mark.parametrize("n", [3, 8])
+def test_ad_hoc_and_mapped_segments_give_the_same_run(monkeypatch, n):
+    """Brief yield patterns go through ad hoc segments until MAP_AFTER_SEGMENTS; with every
+    pattern mapped at once, or never, a yielding run (ductility > 2) ends in the same state,
+    energies and peaks to round-off, with the same events."""
+    import fmu_src.building_response as response
+    from fmu_src.ground_records import load_record
+    from fmu_src.hysteresis import StoreyHysteresis
+    from fmu_src.record_knots import step_knots
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * 9.80665 / rec.pga)
+    b = ShearBuilding.from_period(0.3 * n ** 0.5, [3e5] * n, np.linspace(1.0, 0.6, n), 0.05)
+    fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
+    runs = []
+    for after in (0, 10 ** 9):
+        monkeypatch.setattr(response, "MAP_AFTER_SEGMENTS", after)
+        it = response.integrator_for(b, StoreyHysteresis("bilinear", fy, 0.05))
+        st = it.initial_state(np.zeros(n), np.zeros(n))
+        events = 0
+        for i in range(200):
+            kt, ka = step_knots(rec, 0.02 * i, 0.02 * (i + 1))
+            events += it.advance(st, kt - 0.02 * i, ka, np.zeros(n)).events
+        it.resolve_peaks(st)
+        runs.append((st, events))
+    (a, ea), (c, ec) = runs
+    assert ea == ec > 10
+    assert float(np.max(a.peak_drift / (fy / b.stiffnesses))) > 2.0
+    np.testing.assert_allclose(a.u, c.u, rtol=0, atol=1e-12 * np.abs(c.u).max())
+    np.testing.assert_allclose(a.peaks, c.peaks, rtol=1e-9)
+    for key in ("E_input", "E_damping", "E_hysteretic"):
+        assert getattr(a, key) == pytest.approx(getattr(c, key), rel=1e-11)
