@@ -241,7 +241,9 @@ def test_a_catch_up_costs_three_doSteps_at_a_coarse_base_step(catalog, monkeypat
     long_pieces = simulate_scene(catalog, "free_vibration", ["step=0.02"], dormancy=True, catch_up_span=0.08)
     for run in (asleep, long_pieces):
         stats = run.stats
-        assert stats["dormant_steps"] > 50 and stats["catch_up_replays"] == 0
+        # the contact sleeps through much of the run (measured 49 skipped steps with the
+        # proof's round-off slack, PROOF_SLACK, which takes fewer and longer steps)
+        assert stats["dormant_steps"] > 40 and stats["catch_up_replays"] == 0
         assert stats["catch_up_steps"] <= (1 + ORDINARY_STEPS) * stats["catch_ups"]
         assert run.final["pounding_1.impacts"] == awake.final["pounding_1.impacts"] == 5
         # 1e-3: the criterion (measured 5e-14 and 4e-6: the buildings take long steps
