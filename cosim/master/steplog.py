@@ -18,7 +18,7 @@ beside the rows:
   one the step before), the step's ends and, at both ends, every floor's ``x, v, a`` of the
   buildings that pound and every contact's ``F``, with each such building's inputs over the
   step (held floor forces, the ground acceleration held or as knots).  Default scene: 222 of its
-  692 steps (the contacts last about 0.2 s each).
+  543 steps (the contacts last about 0.2 s each).
 
 Both are numbers of the run itself, whatever the recorded set or the output interval; they are
 returned on :class:`cosim.master.results.SimulationResult` (``contact_steps``,
