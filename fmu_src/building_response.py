@@ -688,6 +688,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
             peak_flags = unload_flags = up_flags = down_flags = None
+            quiet = False      # True: tier 1 proved that no storey changes state in this segment
             if change is not None:
                 bound = change @ np.abs(scan_vector[-4 * n:])
                 if ag1 != 0.0:
@@ -719,7 +720,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
-            if inelastic:
+            if inelastic and not quiet:     # a quiet segment only raises peaks: no event to look for
                 segment, event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags,
                                                    unload_flags, segment)
             stop = rem
