@@ -435,7 +435,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # one length (to round-off) for every interval: canonical_length is monotonic, so the
         # shortest and the longest sharing a map means all do (every step of a run, measured)
         shortest, longest = min(positive), max(positive)
-        uniform = cfg.segment_map(shortest) is first and cfg.segment_map(longest) is first
+        uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
+                   and (longest == positive[0] or cfg.segment_map(longest) is first))
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
         Y = np.empty((count, size))
         Y[:, two_n] = ag0
@@ -478,8 +479,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             bound = np.abs(out[:, 4 * n:]) @ change   # |Re|, |Im| of W z'(0) and |ag slope|
             if inelastic:
                 # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
-                margin = np.where(elastic, self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n],
-                                  state.mode * out[:, 3 * n:4 * n] - bound[:, 3 * n:])
+                if yielding:
+                    margin = np.where(elastic, self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n],
+                                      state.mode * out[:, 3 * n:4 * n] - bound[:, 3 * n:])
+                else:     # every storey elastic: np.where's first branch, fewer operations
+                    margin = self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n]
                 if not margin.min() > 0.0:
                     return None
             # both energy forms summed over the group's intervals: sum_j y_j' Q y_j = <Q, Y'Y>
