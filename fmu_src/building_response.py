@@ -288,6 +288,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._hard_k = self.alpha * self.k                  # the hardening spring
         self._law_memo = None
         self._shear_memo = None
+        limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
+        self._second_order_limits = (limit, -limit)
 
     # -- bilinear storey state -----------------------------------------------------------------
     def _law_facts(self, mode: np.ndarray):
@@ -713,7 +715,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     if not quiet:
                         up_flags = elastic & (e0 + reach >= self.dy)
                         down_flags = elastic & (e0 - reach <= -self.dy)
-                        unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                        if yielding:
+                            unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                        else:      # no yielding storey to unload
+                            unload_flags = np.zeros(n, dtype=bool)
                         quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
                                                          ag1, rem, up_flags, down_flags, unload_flags)
                 else:
@@ -781,9 +786,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
         rem2 = bound[:n] * half
         e1 = e0 + rate0 * length
-        limit = self.dy * (1.0 - 1e-12)
+        limit, low = self._second_order_limits
         up_flags &= np.maximum(e0, e1) + rem2 >= limit
-        down_flags &= np.minimum(e0, e1) - rem2 <= -limit
+        down_flags &= np.minimum(e0, e1) - rem2 <= low
+        if not unload_flags.any():       # no yielding storey left to test (all elastic: most segments)
+            return not (up_flags.any() or down_flags.any())
         m = 3 * n                                # rows of each block of the scan vector; block 4: g''(0)
         mode = state.mode
         g0 = mode * rate0
