@@ -305,19 +305,22 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def _plastic_force(self, state, d):
         """:func:`bilinear_plastic_force` of a state, bit for bit, with the constants made once."""
-        _, yielding, _, q_yield, _, _ = self._law_facts(state.mode)
-        return np.where(yielding, q_yield, self._elastic_k * (d - state.slip))
+        _, yielding, any_yielding, q_yield, _, _ = self._law_facts(state.mode)
+        elastic_part = self._elastic_k * (d - state.slip)
+        # every storey elastic: np.where would select every element of elastic_part
+        return np.where(yielding, q_yield, elastic_part) if any_yielding else elastic_part
 
     def _shear_of(self, state, d):
-        """``(V, q)`` of a state with drifts ``d``, remembered for the last state's arrays (a
-        step publishes V, and the reading of the derived outputs asks for it again)."""
+        """``(V, q, alpha k d)`` of a state with drifts ``d``, remembered for the last state's
+        arrays (a step publishes V, and the reading of the derived outputs asks for it again)."""
         memo = self._shear_memo
         if memo is not None and memo[0] is state.u and memo[1] is state.mode and memo[2] is state.slip:
-            return memo[3], memo[4]
+            return memo[3], memo[4], memo[5]
         q = self._plastic_force(state, d)
-        V = self._hard_k * d + q
-        self._shear_memo = (state.u, state.mode, state.slip, V, q)
-        return V, q
+        hard = self._hard_k * d
+        V = hard + q
+        self._shear_memo = (state.u, state.mode, state.slip, V, q, hard)
+        return V, q, hard
 
     def storey_shear(self, state):
         d = _drift(state.u)
@@ -333,8 +336,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def _shear_and_strain(self, state, d):
         if not self.hysteresis.inelastic:
             return super()._shear_and_strain(state, d)
-        V, q = self._shear_of(state, d)
-        hard = self._hard_k * d
+        V, q, hard = self._shear_of(state, d)
         strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / self._elastic_k))
         return V.copy(), strain
 
