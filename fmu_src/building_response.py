@@ -204,6 +204,7 @@ class BuildingIntegrator:
         hysteresis.check(building.stiffnesses, building.damping_ratio)
         self.building = building
         self.hysteresis = hysteresis
+        self._inelastic = hysteresis.inelastic     # asked at every segment: the property once
         n = building.n
         self.n = n
         self.k = building.stiffnesses
@@ -223,7 +224,7 @@ class BuildingIntegrator:
 
     def residual_drift(self, state: BuildingState) -> np.ndarray:
         """``d - V / k`` per storey (m): see :mod:`fmu_src.hysteresis`."""
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return np.zeros(self.n)
         return _drift(state.u) - self.storey_shear(state) / self.k
 
@@ -324,17 +325,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def storey_shear(self, state):
         d = _drift(state.u)
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return self.k * d
         return self._shear_of(state, d)[0].copy()
 
     def strain_energy(self, state):
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return super().strain_energy(state)
         return bilinear_strain_energy(self.k, self.alpha, _drift(state.u), state.slip, state.mode, self.fy)
 
     def _shear_and_strain(self, state, d):
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return super()._shear_and_strain(state, d)
         V, q, hard = self._shear_of(state, d)
         strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / self._elastic_k))
@@ -342,12 +343,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def configuration(self, mode: np.ndarray) -> Configuration:
         """The linear system of a yield pattern (cached; Rayleigh/modal C stays the initial one)."""
-        if not self.hysteresis.inelastic and self._configs:
+        if not self._inelastic and self._configs:
             return next(iter(self._configs.values()))     # a linear building has one
         key = (mode != 0).tobytes()
         cfg = self._configs.get(key)
         if cfg is None:
-            tangent = bilinear_tangent(self.k, self.alpha, mode) if self.hysteresis.inelastic else self.k
+            tangent = bilinear_tangent(self.k, self.alpha, mode) if self._inelastic else self.k
             cfg = Configuration(self.masses, self.C, tangent, elastic=not mode.any())
             if len(self._configs) >= MAX_CONFIGURATIONS:
                 self._configs.popitem(last=False)
@@ -359,7 +360,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def _net_force(self, state, force):
         """``p = f - D' r``: external force minus the storeys' constant offsets (N)."""
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return np.asarray(force, float)
         if state.offset is None:
             state.offset = _floor_forces(bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode))
@@ -378,7 +379,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
-        if times.size > 3 or (times.size == 3 and not self.hysteresis.inelastic):
+        if times.size > 3 or (times.size == 3 and not self._inelastic):
             # worth batching (None: an event may occur, interval by interval)
             cost = self._advance_batch(state, times, ag, force)
             if cost is not None:
@@ -422,7 +423,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cost = StepCost()
         lengths = times[1:] - times[:-1]             # np.diff's arithmetic
         _, cfg, elastic, yielding = self._mode_facts(state.mode)
-        inelastic = self.hysteresis.inelastic
+        inelastic = self._inelastic
         p = self._net_force(state, force)
         size = 3 * n + 2
         positive = lengths.tolist()
@@ -662,7 +663,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         s = 0.0
         events = 0
         xtol = EVENT_XTOL * max(h, length)
-        inelastic = self.hysteresis.inelastic
+        inelastic = self._inelastic
         while length - s > xtol:
             rem = length - s
             _, cfg, elastic, yielding = self._mode_facts(state.mode)
@@ -808,7 +809,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         state.E_external += float(force @ (u1 - state.u))
         state.E_damping += e_damp
         state.E_input += e_in
-        if yielding and self.hysteresis.inelastic:
+        if yielding and self._inelastic:
             self._yield_along(state, u1)
         state.u = u1
         state.v = z1[n:]
@@ -1008,7 +1009,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         new = state.peaks.copy()
         atol = self._peak_atol
         segments = {}
-        inelastic = self.hysteresis.inelastic
+        inelastic = self._inelastic
         for j, bound, key, y, length, xtol in sorted(state.pending, key=lambda e: -e[1]):
             if bound <= new[j] + atol[j]:
                 continue
