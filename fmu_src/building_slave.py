@@ -65,9 +65,12 @@ _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 _KNOT_TIME_TOL = 1e-9
 # Outputs computed from the state when read (none of them is needed to advance the state).
 # (rows of one block, N_MAX wide, filled at the first read after a step: x_peak, drift_peak and
-# a_peak are the state's running peaks in one copy).  drift_residual is published at every step
-# instead: the master reads it at every step to prove a gap open for a yielding building
-# (cosim/master/gap_bound.py), and reading a derived output runs the deferred peak searches.
+# a_peak are the state's running peaks in one copy).  Reading a peak row runs the deferred
+# in-step peak searches; reading V does not (Building._shear_row: the master reads V at every
+# step and the peaks once at the end, so most searches are superseded before anyone reads
+# them: default_inelastic ran 239 searches with V read at every step, 32 without).
+# drift_residual is published at every step instead: the master reads it at every step to prove
+# a gap open for a yielding building (cosim/master/gap_bound.py).
 _DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
 
 
