@@ -204,6 +204,7 @@ class BuildingIntegrator:
         hysteresis.check(building.stiffnesses, building.damping_ratio)
         self.building = building
         self.hysteresis = hysteresis
+        self._inelastic = hysteresis.inelastic     # asked at every segment: the property once
         n = building.n
         self.n = n
         self.k = building.stiffnesses
@@ -223,7 +224,7 @@ class BuildingIntegrator:
 
     def residual_drift(self, state: BuildingState) -> np.ndarray:
         """``d - V / k`` per storey (m): see :mod:`fmu_src.hysteresis`."""
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return np.zeros(self.n)
         return _drift(state.u) - self.storey_shear(state) / self.k
 
@@ -288,6 +289,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._hard_k = self.alpha * self.k                  # the hardening spring
         self._law_memo = None
         self._shear_memo = None
+        limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
+        self._second_order_limits = (limit, -limit)
 
     # -- bilinear storey state -----------------------------------------------------------------
     def _law_facts(self, mode: np.ndarray):
@@ -303,47 +306,49 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def _plastic_force(self, state, d):
         """:func:`bilinear_plastic_force` of a state, bit for bit, with the constants made once."""
-        _, yielding, _, q_yield, _, _ = self._law_facts(state.mode)
-        return np.where(yielding, q_yield, self._elastic_k * (d - state.slip))
+        _, yielding, any_yielding, q_yield, _, _ = self._law_facts(state.mode)
+        elastic_part = self._elastic_k * (d - state.slip)
+        # every storey elastic: np.where would select every element of elastic_part
+        return np.where(yielding, q_yield, elastic_part) if any_yielding else elastic_part
 
     def _shear_of(self, state, d):
-        """``(V, q)`` of a state with drifts ``d``, remembered for the last state's arrays (a
-        step publishes V, and the reading of the derived outputs asks for it again)."""
+        """``(V, q, alpha k d)`` of a state with drifts ``d``, remembered for the last state's
+        arrays (a step publishes V, and the reading of the derived outputs asks for it again)."""
         memo = self._shear_memo
         if memo is not None and memo[0] is state.u and memo[1] is state.mode and memo[2] is state.slip:
-            return memo[3], memo[4]
+            return memo[3], memo[4], memo[5]
         q = self._plastic_force(state, d)
-        V = self._hard_k * d + q
-        self._shear_memo = (state.u, state.mode, state.slip, V, q)
-        return V, q
+        hard = self._hard_k * d
+        V = hard + q
+        self._shear_memo = (state.u, state.mode, state.slip, V, q, hard)
+        return V, q, hard
 
     def storey_shear(self, state):
         d = _drift(state.u)
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return self.k * d
         return self._shear_of(state, d)[0].copy()
 
     def strain_energy(self, state):
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return super().strain_energy(state)
         return bilinear_strain_energy(self.k, self.alpha, _drift(state.u), state.slip, state.mode, self.fy)
 
     def _shear_and_strain(self, state, d):
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return super()._shear_and_strain(state, d)
-        V, q = self._shear_of(state, d)
-        hard = self._hard_k * d
+        V, q, hard = self._shear_of(state, d)
         strain = 0.5 * float(hard @ d) + 0.5 * float(q @ (q / self._elastic_k))
         return V.copy(), strain
 
     def configuration(self, mode: np.ndarray) -> Configuration:
         """The linear system of a yield pattern (cached; Rayleigh/modal C stays the initial one)."""
-        if not self.hysteresis.inelastic and self._configs:
+        if not self._inelastic and self._configs:
             return next(iter(self._configs.values()))     # a linear building has one
         key = (mode != 0).tobytes()
         cfg = self._configs.get(key)
         if cfg is None:
-            tangent = bilinear_tangent(self.k, self.alpha, mode) if self.hysteresis.inelastic else self.k
+            tangent = bilinear_tangent(self.k, self.alpha, mode) if self._inelastic else self.k
             cfg = Configuration(self.masses, self.C, tangent, elastic=not mode.any())
             if len(self._configs) >= MAX_CONFIGURATIONS:
                 self._configs.popitem(last=False)
@@ -355,7 +360,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
 
     def _net_force(self, state, force):
         """``p = f - D' r``: external force minus the storeys' constant offsets (N)."""
-        if not self.hysteresis.inelastic:
+        if not self._inelastic:
             return np.asarray(force, float)
         if state.offset is None:
             state.offset = _floor_forces(bilinear_offset(self.k, self.fy, self.alpha, state.slip, state.mode))
@@ -374,7 +379,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
-        if times.size > 3 or (times.size == 3 and not self.hysteresis.inelastic):
+        if times.size > 3 or (times.size == 3 and not self._inelastic):
             # worth batching (None: an event may occur, interval by interval)
             cost = self._advance_batch(state, times, ag, force)
             if cost is not None:
@@ -418,7 +423,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cost = StepCost()
         lengths = times[1:] - times[:-1]             # np.diff's arithmetic
         _, cfg, elastic, yielding = self._mode_facts(state.mode)
-        inelastic = self.hysteresis.inelastic
+        inelastic = self._inelastic
         p = self._net_force(state, force)
         size = 3 * n + 2
         positive = lengths.tolist()
@@ -435,7 +440,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # one length (to round-off) for every interval: canonical_length is monotonic, so the
         # shortest and the longest sharing a map means all do (every step of a run, measured)
         shortest, longest = min(positive), max(positive)
-        uniform = cfg.segment_map(shortest) is first and cfg.segment_map(longest) is first
+        uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
+                   and (longest == positive[0] or cfg.segment_map(longest) is first))
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
         Y = np.empty((count, size))
         Y[:, two_n] = ag0
@@ -478,8 +484,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             bound = np.abs(out[:, 4 * n:]) @ change   # |Re|, |Im| of W z'(0) and |ag slope|
             if inelastic:
                 # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
-                margin = np.where(elastic, self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n],
-                                  state.mode * out[:, 3 * n:4 * n] - bound[:, 3 * n:])
+                if yielding:
+                    margin = np.where(elastic, self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n],
+                                      state.mode * out[:, 3 * n:4 * n] - bound[:, 3 * n:])
+                else:     # every storey elastic: np.where's first branch, fewer operations
+                    margin = self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n]
                 if not margin.min() > 0.0:
                     return None
             # both energy forms summed over the group's intervals: sum_j y_j' Q y_j = <Q, Y'Y>
@@ -654,7 +663,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         s = 0.0
         events = 0
         xtol = EVENT_XTOL * max(h, length)
-        inelastic = self.hysteresis.inelastic
+        inelastic = self._inelastic
         while length - s > xtol:
             rem = length - s
             _, cfg, elastic, yielding = self._mode_facts(state.mode)
@@ -665,7 +674,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             segment = None
             e_damp = e_in = None
             change = None
-            if s == 0.0 and (not inelastic or self._worth_a_map(cfg, rem, elastic)):
+            if s == 0.0 and (not inelastic or self._worth_a_map(cfg, rem, not yielding)):
                 # a whole knot interval or step (a repeated length): one product with the
                 # cached map gives the end state, z'(0), the watched values, the test
                 # quantities and the energy forms
@@ -688,6 +697,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
             peak_flags = unload_flags = up_flags = down_flags = None
+            quiet = False      # True: tier 1 proved that no storey changes state in this segment
             if change is not None:
                 bound = change @ np.abs(scan_vector[-4 * n:])
                 if ag1 != 0.0:
@@ -699,12 +709,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
                     e0 = watched[n:2 * n] - state.slip
                     reach = bound[n:2 * n]
-                    margin = np.where(elastic, self.dy - np.abs(e0) - reach, state.mode * watched[3 * n:] - bound[3 * n:])
+                    if yielding:
+                        margin = np.where(elastic, self.dy - np.abs(e0) - reach,
+                                          state.mode * watched[3 * n:] - bound[3 * n:])
+                    else:      # every storey elastic: np.where's first branch, fewer operations
+                        margin = self.dy - np.abs(e0) - reach
                     quiet = bool(margin.min() > 0.0)
                     if not quiet:
                         up_flags = elastic & (e0 + reach >= self.dy)
                         down_flags = elastic & (e0 - reach <= -self.dy)
-                        unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                        if yielding:
+                            unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                        else:      # no yielding storey to unload
+                            unload_flags = np.zeros(n, dtype=bool)
                         quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
                                                          ag1, rem, up_flags, down_flags, unload_flags)
                 else:
@@ -715,7 +732,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
-            if inelastic:
+            if inelastic and not quiet:     # a quiet segment only raises peaks: no event to look for
                 segment, event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags,
                                                    unload_flags, segment)
             stop = rem
@@ -740,14 +757,14 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         return events
 
     @staticmethod
-    def _worth_a_map(cfg, length, elastic) -> bool:
+    def _worth_a_map(cfg, length, all_elastic: bool) -> bool:
         """Whether an interval of a yielding building's configuration goes through the cached
         segment map of its length (built now if missing) rather than ad hoc.  A map costs about
         as much as ten ad hoc segments (15 storeys: 1.4 ms against 0.1-0.2 ms, loaded), and in a
         tall building most yield patterns last a few intervals (kasai_maison_inelastic: 227
         patterns, 85 of them met in one or two intervals): a pattern gets its map from its
         ``MAP_AFTER_SEGMENTS + 1``-th segment on; the elastic one at once."""
-        if elastic.all() or cfg.has_map(length):
+        if all_elastic or cfg.has_map(length):
             return True
         cfg.segments_without_map += 1
         return cfg.segments_without_map > MAP_AFTER_SEGMENTS
@@ -772,9 +789,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
         rem2 = bound[:n] * half
         e1 = e0 + rate0 * length
-        limit = self.dy * (1.0 - 1e-12)
+        limit, low = self._second_order_limits
         up_flags &= np.maximum(e0, e1) + rem2 >= limit
-        down_flags &= np.minimum(e0, e1) - rem2 <= -limit
+        down_flags &= np.minimum(e0, e1) - rem2 <= low
+        if not unload_flags.any():       # no yielding storey left to test (all elastic: most segments)
+            return not (up_flags.any() or down_flags.any())
         m = 3 * n                                # rows of each block of the scan vector; block 4: g''(0)
         mode = state.mode
         g0 = mode * rate0
@@ -790,7 +809,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         state.E_external += float(force @ (u1 - state.u))
         state.E_damping += e_damp
         state.E_input += e_in
-        if yielding and self.hysteresis.inelastic:
+        if yielding and self._inelastic:
             self._yield_along(state, u1)
         state.u = u1
         state.v = z1[n:]
@@ -837,22 +856,30 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             up_flags = down_flags = elastic
             unload_flags = ~elastic
         w4 = rem ** 4 / 384.0
-        G, B = scan.G, scan.B
+        storeys = np.flatnonzero(up_flags | down_flags | unload_flags).tolist()
+        if not storeys:
+            return segment, None
+        # The tests on Python floats: the same IEEE double operations as on numpy scalars (so
+        # the same bits and decisions), at a fraction of their cost per operation.
+        G = scan.G[n:2 * n].tolist()                    # the drift rows
+        B = scan.B[n:2 * n].tolist()
+        modes, slips, dys = mode.tolist(), state.slip.tolist(), self.dy.tolist()
+        ups, downs, unloads = up_flags.tolist(), down_flags.tolist(), unload_flags.tolist()
         candidates = []
-        for i in np.flatnonzero(up_flags | down_flags | unload_flags):
-            r = n + i                                   # the drift row of storey i
-            if mode[i] == 0:
-                s = state.slip[i]
-                lo, hi = hermite_range_scalar(G[r, 0] - s, G[r, 1] - s, rem * G[r, 2], rem * G[r, 3])
-                err = B[r, 0] * w4
-                if up_flags[i] and hi + err >= self.dy[i]:
+        for i in storeys:
+            g = G[i]
+            if modes[i] == 0:
+                s = slips[i]
+                lo, hi = hermite_range_scalar(g[0] - s, g[1] - s, rem * g[2], rem * g[3])
+                err = B[i][0] * w4
+                if ups[i] and hi + err >= dys[i]:
                     candidates.append((i, +1))
-                if down_flags[i] and lo - err <= -self.dy[i]:
+                if downs[i] and lo - err <= -dys[i]:
                     candidates.append((i, -1))
-            elif unload_flags[i]:
-                sg = float(mode[i])
-                lo, _ = hermite_range_scalar(sg * G[r, 2], sg * G[r, 3], rem * sg * G[r, 4], rem * sg * G[r, 5])
-                if lo - B[r, 1] * w4 <= 0.0:
+            elif unloads[i]:
+                sg = float(modes[i])
+                lo, _ = hermite_range_scalar(sg * g[2], sg * g[3], rem * sg * g[4], rem * sg * g[5])
+                if lo - B[i][1] * w4 <= 0.0:
                     candidates.append((i, 0))
         if not candidates:
             return segment, None
@@ -982,7 +1009,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         new = state.peaks.copy()
         atol = self._peak_atol
         segments = {}
-        inelastic = self.hysteresis.inelastic
+        inelastic = self._inelastic
         for j, bound, key, y, length, xtol in sorted(state.pending, key=lambda e: -e[1]):
             if bound <= new[j] + atol[j]:
                 continue

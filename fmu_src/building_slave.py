@@ -65,9 +65,12 @@ _K_DEFAULT = 1e5 * (2.0 * math.pi / 0.5) ** 2
 _KNOT_TIME_TOL = 1e-9
 # Outputs computed from the state when read (none of them is needed to advance the state).
 # (rows of one block, N_MAX wide, filled at the first read after a step: x_peak, drift_peak and
-# a_peak are the state's running peaks in one copy).  drift_residual is published at every step
-# instead: the master reads it at every step to prove a gap open for a yielding building
-# (cosim/master/gap_bound.py), and reading a derived output runs the deferred peak searches.
+# a_peak are the state's running peaks in one copy).  Reading a peak row runs the deferred
+# in-step peak searches; reading V does not (Building._shear_row: the master reads V at every
+# step and the peaks once at the end, so most searches are superseded before anyone reads
+# them: default_inelastic ran 239 searches with V read at every step, 32 without).
+# drift_residual is published at every step instead: the master reads it at every step to prove
+# a gap open for a yielding building (cosim/master/gap_bound.py).
 _DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
 
 
@@ -154,6 +157,7 @@ class Building(Fmi2Slave):
         self._state = None
         self._stepped_lengths = frozenset()
         self._derived_cache = None
+        self._shear_fresh = False
         super().__init__(**kwargs)
         # Storey elements are checked only up to n_storeys (in validate): unused ones are ignored.
         self._element_checks = tuple(slot for slot in self._checked if slot[2] is not None)
@@ -174,6 +178,11 @@ class Building(Fmi2Slave):
         if attr not in _DERIVED:
             return super()._element_getter(attr, idx)
 
+        if attr == "V":
+            def get():
+                return 0.0 if self._state is None else float(self._shear_row()[idx])
+            return get
+
         def get():
             if self._state is None:
                 return 0.0
@@ -189,7 +198,19 @@ class Building(Fmi2Slave):
         """A derived output whole (N_MAX elements, 0 above n_storeys), as its element getters read it."""
         if self._state is None:
             return np.zeros(N_MAX)
+        if attr == "V":
+            return self._shear_row()
         return self._derived()[attr]
+
+    def _shear_row(self) -> np.ndarray:
+        """``V`` (row 0 of the block of derived outputs) without the deferred peak searches: the
+        master reads V at every step and the peaks only at the end, and a search run at every
+        step cannot be superseded by a later, higher peak (:meth:`ExactPiecewiseLinear._peaks`).
+        Filled by :meth:`_publish` where it computes V anyway."""
+        if not self._shear_fresh:
+            self._derived_block[0, :self._n] = self._integrator.storey_shear(self._state)
+            self._shear_fresh = True
+        return self._derived_block[0]
 
     def _derived(self) -> dict[str, np.ndarray]:
         """The derived outputs of the current state by name, rows of one block N_MAX wide (0 above
@@ -197,8 +218,8 @@ class Building(Fmi2Slave):
         if self._derived_cache is None:
             state, integ, n = self._state, self._integrator, self._n
             integ.resolve_peaks(state, self.cost)      # the in-step peak searches left to do
+            self._shear_row()
             block = self._derived_block
-            block[0, :n] = integ.storey_shear(state)
             block[1:4, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
             np.divide(state.peak_drift, self.storey_height[:n], out=block[4, :n])
             np.multiply(state.peak_drift, self._inv_yield_drift, out=block[5, :n])
@@ -208,6 +229,7 @@ class Building(Fmi2Slave):
     def _set_fmu_state(self, state):
         super()._set_fmu_state(state)
         self._derived_cache = None
+        self._shear_fresh = False
 
     # -- initialisation ------------------------------------------------------------------------
     def validate(self):
@@ -239,6 +261,7 @@ class Building(Fmi2Slave):
         self._n = n
         self._state = state
         self._derived_cache = None
+        self._shear_fresh = False
         self.cost = StepCost()
         fy = self.Fy[:n]
         with np.errstate(divide="ignore"):
@@ -282,6 +305,7 @@ class Building(Fmi2Slave):
             self.E_damping = state.E_damping
             self.E_hysteretic = state.E_hysteretic
             self._derived_cache = None
+            self._shear_fresh = False
             return
         drift, V, accel, strain = self._integrator.response(state, force, acceleration=not self._legacy)
         self.x[:n] = state.u
@@ -294,6 +318,7 @@ class Building(Fmi2Slave):
         else:
             self.a[:n] = accel
         self.base_shear = float(V[0])
+        self._derived_block[0, :n] = V      # the V output (_shear_row), computed here anyway
         self.E_kinetic = 0.5 * float(state.v @ (self._building.masses * state.v))
         self.E_strain = strain
         self.E_input = state.E_input
@@ -301,6 +326,7 @@ class Building(Fmi2Slave):
         self.E_damping = state.E_damping
         self.E_hysteretic = state.E_hysteretic
         self._derived_cache = None
+        self._shear_fresh = True
 
     # -- stepping ----------------------------------------------------------------------------
     def _zoh_entry(self, step_size: float):
@@ -488,6 +514,7 @@ class Building(Fmi2Slave):
         self.E_kinetic = kinetic
         self.E_strain = strain
         self._derived_cache = None
+        self._shear_fresh = False
 
     def _step_outputs_problem(self) -> str | None:
         return None   # step() refuses a non-finite state before committing it (both paths)
