@@ -63,6 +63,9 @@ ELASTIC_MARGIN = 1e-6
 YIELDING_SLACK = 1e-9
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
 _POINTS = np.arange(GRID + 1, dtype=float)
+#: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
+#: their overhead is its cost)
+_ALL, _ANY, _AND = np.logical_and.reduce, np.logical_or.reduce, np.logical_and
 
 
 class ModalBound:
@@ -155,14 +158,21 @@ class FloorMotion:
     first use: one matrix product per part instead of one per floor and level."""
 
     def __init__(self, bound: ModalBound, u: np.ndarray, v: np.ndarray, H: float,
-                 ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None):
+                 ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None,
+                 about: np.ndarray | None = None):
         """``ground_bound[k]`` (m/s^2) bounds ``|ag|`` over ``[0, s_k]``; ``force`` (N, per floor)
         is held over the horizon (None: no force); ``shift`` (m, per floor) the static
-        displacement the modes move about (yielding storeys' slips, module docstring; None: 0)."""
+        displacement the modes move about (yielding storeys' slips, module docstring; None: 0);
+        ``about``, if given, is ``u - shift`` already computed (the same numbers, not again)."""
         self.bound = bound
         self.shift = shift
-        self.Q, self.speed = bound.free_motion(u if shift is None else u - shift, v, H)
         cached = bound._cached(H)
+        # the modal free motion (ModalBound.free_motion, inlined: one table look-up per proof)
+        w = u if shift is None else (u - shift if about is None else about)
+        q = bound.to_modal @ w
+        qd = bound.to_modal @ v
+        self.Q = cached[1] * q[:, None] + cached[2] * (qd + bound.zeta_w * q)[:, None]
+        self.speed = np.sqrt((bound.w * q) ** 2 + qd * qd)
         self.G = cached[3]
         self.ground = ground_bound
         # the rows computed: the floors, and the storey drifts about a shift
@@ -170,7 +180,7 @@ class FloorMotion:
             self._rows, self._abs_rows, self._rows_ground = bound.phi, bound.abs_phi, cached[4]
         else:
             self._rows, self._abs_rows, self._rows_ground = bound.rows, bound.abs_rows, cached[5]
-        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and np.any(force) else None
+        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and force.any() else None
         self._all = self._floors = None
 
     def _rows_motion(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -235,13 +245,16 @@ def band_horizon(free: np.ndarray, forced: np.ndarray, rate: np.ndarray, lo: np.
     inside ``(lo, hi)``, from :meth:`FloorMotion.drifts` (rows x points, per row) and the
     bounds ``lo``, ``hi`` per row (0 if a row is not inside now)."""
     x0 = free[:, 0]
-    if not ((x0 > lo).all() and (x0 < hi).all()):
+    if not _ALL(_AND(x0 > lo, x0 < hi)):
         return 0.0
     dS = H / GRID
     # interval k: the free part within its rate bound of the chord's mean, the forced at its end
-    mid = 0.5 * (free[:, :-1] + free[:, 1:])
+    mid = free[:, :-1] + free[:, 1:]
+    mid *= 0.5
     slack = 0.5 * dS * rate[:, None] + forced[:, 1:]
-    bad = ((mid + slack >= hi[:, None]) | (mid - slack <= lo[:, None])).any(axis=0)
+    bad = mid + slack >= hi[:, None]
+    bad |= mid - slack <= lo[:, None]
+    bad = _ANY(bad, axis=0)
     first = int(bad.argmax())
     return float(first) * dS if bad[first] else H
 
@@ -255,12 +268,16 @@ class ElasticRange:
         self.half_width = (1.0 - ELASTIC_MARGIN) * np.asarray(yield_drift, dtype=float)
         self.slack = YIELDING_SLACK * np.asarray(yield_drift, dtype=float)
         self.residual = residual
+        # computed once, not per proof (the same numbers: ``centre = factor * r`` and the sum
+        # of two constants)
+        self._centre_factor = self.alpha / (1.0 - self.alpha)
+        self._yielding_limit = self.half_width + self.slack
 
     def shift(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u_s, alpha s)``: the floors' static displacement about which the storeys are
         linear (m) and the centre of each storey's elastic range in ``D w`` (m)."""
         r = y[self.residual]
-        return np.cumsum(r), self.alpha / (1.0 - self.alpha) * r
+        return r.cumsum(), self._centre_factor * r
 
     def yielding(self, w: np.ndarray, centre: np.ndarray) -> bool:
         """A storey yields now, beyond doubt: its drift about the shift, from the floors' ``w =
@@ -270,7 +287,8 @@ class ElasticRange:
         a yielding building is proven again at every step and fails at once."""
         d = w.copy()
         d[1:] -= w[:-1]
-        return bool((np.abs(d - centre) >= self.half_width + self.slack).any())
+        d -= centre
+        return bool(_ANY(np.abs(d, out=d) >= self._yielding_limit))
 
     def horizon(self, motion: FloorMotion, centre: np.ndarray, H: float) -> float:
         """Longest ``s <= H`` (s) over which every storey provably stays elastic."""
@@ -396,50 +414,49 @@ class OpenGaps:
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         forces = forces or {}
-        lazy = [ground] if callable(ground) else None
-
-        def ground_bound():
-            if lazy is None:
-                return ground
-            if callable(lazy[0]):
-                lazy[0] = lazy[0]()
-            return lazy[0]
-
-        def linear_for(b):
-            s = linear.get(b)
-            if s is None:
-                bound, ix, iv = self.buildings[b]
-                elastic = self.elastic.get(b)
-                if elastic is None:
-                    motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b))
-                    s = linear[b] = H
-                else:
-                    shift, centre = elastic.shift(y)
-                    if elastic.yielding(y[ix] - shift, centre):
-                        s = linear[b] = 0.0         # no proof: base steps
-                    else:
-                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b), shift)
-                        s = linear[b] = elastic.horizon(motions[b], centre, H)
-            return s
-
+        elastic_ranges = self.elastic
         pairs = self._pairs(which)
         out = [0.0] * sum(len(p[2]) for p in pairs)
         dS = H / GRID
         for left, right, positions, fl, fr, gap in pairs:
-            s = linear_for(left)
-            if s == 0.0 or (s := min(s, linear_for(right))) == 0.0:
-                continue
-            xl, bl, ll = motions[left].floors()
-            xr, br, lr = motions[right].floors()
-            delta = xl[fl] - xr[fr] - gap[:, None]
-            # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
-            upper = (0.5 * (delta[:, :-1] + delta[:, 1:]) + (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
-                     + bl[fl, 1:] + br[fr, 1:])
-            bad = upper >= 0.0
-            first = bad.argmax(axis=1)
-            closed = delta[:, 0] >= 0.0
-            for i, pos in enumerate(positions):
-                if closed[i]:
-                    continue
-                out[pos] = min(s, float(first[i]) * dS if bad[i, first[i]] else H)
+            for b in (left, right):
+                s = linear.get(b)
+                if s is None:
+                    # how long building b provably stays linear (a yielding one ends the proof
+                    # before its motion, and the ground bound, is computed)
+                    bound, ix, iv = self.buildings[b]
+                    elastic = elastic_ranges.get(b)
+                    if elastic is None:
+                        if callable(ground):
+                            ground = ground()
+                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, forces.get(b))
+                        s = linear[b] = H
+                    else:
+                        shift, centre = elastic.shift(y)
+                        w = y[ix] - shift
+                        if elastic.yielding(w, centre):
+                            s = linear[b] = 0.0         # no proof: base steps
+                        else:
+                            if callable(ground):
+                                ground = ground()
+                            motions[b] = FloorMotion(bound, None, y[iv], H, ground, forces.get(b), shift,
+                                                     about=w)
+                            s = linear[b] = elastic.horizon(motions[b], centre, H)
+                if s == 0.0:
+                    break
+            else:
+                s = min(linear[left], linear[right])
+                xl, bl, ll = motions[left].floors()
+                xr, br, lr = motions[right].floors()
+                delta = xl[fl] - xr[fr] - gap[:, None]
+                # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
+                upper = (0.5 * (delta[:, :-1] + delta[:, 1:]) + (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
+                         + bl[fl, 1:] + br[fr, 1:])
+                bad = upper >= 0.0
+                first = bad.argmax(axis=1)
+                closed = delta[:, 0] >= 0.0
+                for i, pos in enumerate(positions):
+                    if closed[i]:
+                        continue
+                    out[pos] = min(s, float(first[i]) * dS if bad[i, first[i]] else H)
         return out
