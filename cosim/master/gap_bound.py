@@ -140,6 +140,14 @@ class ModalBound:
         out = self._tables[H] = (s, Ac, As, G, (self.abs_phi * gamma) @ G, (self.abs_rows * gamma) @ G)
         return out
 
+    def modal_state(self, u: np.ndarray, v: np.ndarray) -> list:
+        """What a free motion needs from the floors' state, whatever the horizon: ``[q, q' +
+        zeta w q]`` as columns (modal units), the bound ``sqrt(w_j^2 q_j^2 + q_j'^2)`` on each
+        mode's free rate, and a slot for the rows' rate bound (:class:`FloorMotion` fills it)."""
+        q = self.to_modal @ u
+        qd = self.to_modal @ v
+        return [q[:, None], (qd + self.zeta_w * q)[:, None], np.sqrt((self.w * q) ** 2 + qd * qd), None]
+
     def free_motion(self, u: np.ndarray, v: np.ndarray, H: float) -> tuple[np.ndarray, np.ndarray]:
         """``(Q, speed)``: the modal free motion ``q_j(s_k)`` (modes x points) from the floor
         displacements ``u`` and velocities ``v`` (m, m/s, relative to the ground) and the bound
@@ -159,20 +167,21 @@ class FloorMotion:
 
     def __init__(self, bound: ModalBound, u: np.ndarray, v: np.ndarray, H: float,
                  ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None,
-                 about: np.ndarray | None = None):
+                 about: np.ndarray | None = None, modal: list | None = None):
         """``ground_bound[k]`` (m/s^2) bounds ``|ag|`` over ``[0, s_k]``; ``force`` (N, per floor)
         is held over the horizon (None: no force); ``shift`` (m, per floor) the static
         displacement the modes move about (yielding storeys' slips, module docstring; None: 0);
-        ``about``, if given, is ``u - shift`` already computed (the same numbers, not again)."""
+        ``about``, if given, is ``u - shift`` already computed, ``modal`` what
+        :meth:`ModalBound.modal_state` gave for it (the same numbers, not again)."""
         self.bound = bound
         self.shift = shift
         cached = bound._cached(H)
-        # the modal free motion (ModalBound.free_motion, inlined: one table look-up per proof)
-        w = u if shift is None else (u - shift if about is None else about)
-        q = bound.to_modal @ w
-        qd = bound.to_modal @ v
-        self.Q = cached[1] * q[:, None] + cached[2] * (qd + bound.zeta_w * q)[:, None]
-        self.speed = np.sqrt((bound.w * q) ** 2 + qd * qd)
+        if modal is None:
+            w = u if shift is None else (u - shift if about is None else about)
+            modal = bound.modal_state(w, v)
+        self._modal = modal
+        self.Q = cached[1] * modal[0] + cached[2] * modal[1]
+        self.speed = modal[2]
         self.G = cached[3]
         self.ground = ground_bound
         # the rows computed: the floors, and the storey drifts about a shift
@@ -189,7 +198,10 @@ class FloorMotion:
             forced = self._rows_ground * self.ground
             if self.modal_force is not None:
                 forced = forced + (self._abs_rows * self.modal_force) @ self.G
-            self._all = (free, forced, self._abs_rows @ self.speed)
+            rate = self._modal[3]
+            if rate is None:                # the rows' rate bound: the same for every horizon
+                rate = self._modal[3] = self._abs_rows @ self.speed
+            self._all = (free, forced, rate)
         return self._all
 
     def floors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -343,6 +355,12 @@ class OpenGaps:
         self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
         self.elastic = elastic or {}        # name -> ElasticRange, for the bilinear buildings
         self._all_pairs = None
+        # what a building's proof reads from System.y, in one gather: floors' x, v, residual drifts
+        self._reads = {b: np.concatenate((ix, iv) + ((self.elastic[b].residual,) if b in self.elastic else ()))
+                       for b, (_, ix, iv) in buildings.items()}
+        # building -> (its reads as bytes, _BuildingState): a step proves its gaps over a few
+        # horizons from the same state (the long step, the quiet horizon, the step)
+        self._states: dict = {}
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
@@ -395,11 +413,29 @@ class OpenGaps:
             g[1].append(fl)
             g[2].append(fr)
             g[3].append(gap)
-        pairs = [(left, right, pos, np.array(fl, dtype=np.intp), np.array(fr, dtype=np.intp), np.array(gap, dtype=float))
+        pairs = [(left, right, pos, np.array(fl, dtype=np.intp), np.array(fr, dtype=np.intp),
+                  np.array(gap, dtype=float)[:, None])
                  for (left, right), (pos, fl, fr, gap) in groups.items()]
         if which is None:
             self._all_pairs = pairs
         return pairs
+
+    def _state(self, b: str, bound: ModalBound, reads: np.ndarray) -> tuple:
+        """``(yielding, shift, centre, w, v, modal)`` of building ``b`` from its reads (floors' x,
+        v and residual drifts): whether a storey yields now, the static shift and the elastic
+        ranges' centres (None for a linear building), the floors' displacement about the shift,
+        their velocities and :meth:`ModalBound.modal_state` (None if yielding)."""
+        n = bound.n
+        u, v = reads[:n], reads[n:2 * n]
+        elastic = self.elastic.get(b)
+        if elastic is None:
+            return False, None, None, u, v, bound.modal_state(u, v)
+        r = reads[2 * n:]
+        shift, centre = r.cumsum(), elastic._centre_factor * r     # ElasticRange.shift, from the reads
+        w = u - shift
+        if elastic.yielding(w, centre):
+            return True, shift, centre, w, v, None
+        return False, shift, centre, w, v, bound.modal_state(w, v)
 
     def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
                  which: Sequence[int] | None = None) -> list[float]:
@@ -425,38 +461,41 @@ class OpenGaps:
                     # how long building b provably stays linear (a yielding one ends the proof
                     # before its motion, and the ground bound, is computed)
                     bound, ix, iv = self.buildings[b]
-                    elastic = elastic_ranges.get(b)
-                    if elastic is None:
+                    reads = y[self._reads[b]]
+                    key = reads.tobytes()
+                    known = self._states.get(b)
+                    if known is not None and known[0] == key:
+                        state = known[1]
+                    else:
+                        state = self._state(b, bound, reads)
+                        self._states[b] = (key, state)
+                    yielding, shift, centre, w, v, modal = state
+                    if yielding:
+                        s = linear[b] = 0.0         # no proof: base steps
+                    else:
                         if callable(ground):
                             ground = ground()
-                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground, forces.get(b))
-                        s = linear[b] = H
-                    else:
-                        shift, centre = elastic.shift(y)
-                        w = y[ix] - shift
-                        if elastic.yielding(w, centre):
-                            s = linear[b] = 0.0         # no proof: base steps
-                        else:
-                            if callable(ground):
-                                ground = ground()
-                            motions[b] = FloorMotion(bound, None, y[iv], H, ground, forces.get(b), shift,
-                                                     about=w)
-                            s = linear[b] = elastic.horizon(motions[b], centre, H)
+                        motions[b] = FloorMotion(bound, w, v, H, ground, forces.get(b), shift, about=w, modal=modal)
+                        elastic = elastic_ranges.get(b)
+                        s = linear[b] = H if elastic is None else elastic.horizon(motions[b], centre, H)
                 if s == 0.0:
                     break
             else:
                 s = min(linear[left], linear[right])
                 xl, bl, ll = motions[left].floors()
                 xr, br, lr = motions[right].floors()
-                delta = xl[fl] - xr[fr] - gap[:, None]
+                delta = xl[fl] - xr[fr] - gap
                 # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
-                upper = (0.5 * (delta[:, :-1] + delta[:, 1:]) + (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
-                         + bl[fl, 1:] + br[fr, 1:])
+                upper = delta[:, :-1] + delta[:, 1:]
+                upper *= 0.5
+                upper += (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
+                upper += bl[fl, 1:]
+                upper += br[fr, 1:]
                 bad = upper >= 0.0
-                first = bad.argmax(axis=1)
-                closed = delta[:, 0] >= 0.0
-                for i, pos in enumerate(positions):
-                    if closed[i]:
-                        continue
-                    out[pos] = min(s, float(first[i]) * dS if bad[i, first[i]] else H)
+                first = bad.argmax(axis=1).tolist()
+                hit = _ANY(bad, axis=1).tolist()
+                closed = (delta[:, 0] >= 0.0).tolist()
+                for pos, c, f, h in zip(positions, closed, first, hit):
+                    if not c:
+                        out[pos] = min(s, float(f) * dS if h else H)
         return out
