@@ -65,7 +65,7 @@ YIELDING_SLACK = 1e-9
 _POINTS = np.arange(GRID + 1, dtype=float)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
-_ALL, _ANY, _AND = np.logical_and.reduce, np.logical_or.reduce, np.logical_and
+_ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
 
 
 class ModalBound:
@@ -312,17 +312,23 @@ def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) 
     """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
     must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
     s = t0 + H * _POINTS / GRID
-    out = np.maximum.accumulate(np.abs(np.interp(s, times, values)))
-    lo = np.searchsorted(times, t0, side="left")
-    hi = np.searchsorted(times, t0 + H, side="right")
+    out = np.abs(np.interp(s, times, values))
+    _MAX.accumulate(out, out=out)
+    lo = times.searchsorted(t0, side="left")
+    hi = times.searchsorted(t0 + H, side="right")
     if hi > lo:
         # a knot's value counts from the first grid point at or after it: the largest |value|
         # of the knots up to each grid point (a prefix maximum, sampled where each grid point falls)
         knots = times[lo:hi]
-        prefix = np.maximum.accumulate(np.abs(values[lo:hi]))
-        k = np.searchsorted(knots, s, side="right")          # knots at or before each grid point
-        reached = k > 0
-        out[reached] = np.maximum(out[reached], prefix[k[reached] - 1])
+        prefix = np.abs(values[lo:hi])
+        _MAX.accumulate(prefix, out=prefix)
+        # the grid points at or after the first knot (k > 0 there: k counts the knots at or
+        # before each grid point, and grows along the grid)
+        first = s.searchsorted(knots[0], side="left")
+        k = knots.searchsorted(s[first:], side="right")
+        k -= 1
+        tail = out[first:]
+        _MAX(tail, prefix[k], out=tail)
     return out
 
 
