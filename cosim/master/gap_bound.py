@@ -427,21 +427,23 @@ class OpenGaps:
         return pairs
 
     def _state(self, b: str, bound: ModalBound, reads: np.ndarray) -> tuple:
-        """``(yielding, shift, centre, w, v, modal)`` of building ``b`` from its reads (floors' x,
-        v and residual drifts): whether a storey yields now, the static shift and the elastic
-        ranges' centres (None for a linear building), the floors' displacement about the shift,
-        their velocities and :meth:`ModalBound.modal_state` (None if yielding)."""
+        """``(yielding, shift, w, v, modal, band)`` of building ``b`` from its reads (floors' x,
+        v and residual drifts): whether a storey yields now, the static shift (None for a
+        linear building), the floors' displacement about the shift, their velocities,
+        :meth:`ModalBound.modal_state` (None if yielding) and each storey's elastic range
+        ``(lo, hi)`` in ``D w`` (None for a linear building or a yielding one)."""
         n = bound.n
         u, v = reads[:n], reads[n:2 * n]
         elastic = self.elastic.get(b)
         if elastic is None:
-            return False, None, None, u, v, bound.modal_state(u, v)
+            return False, None, u, v, bound.modal_state(u, v), None
         r = reads[2 * n:]
         shift, centre = r.cumsum(), elastic._centre_factor * r     # ElasticRange.shift, from the reads
         w = u - shift
         if elastic.yielding(w, centre):
-            return True, shift, centre, w, v, None
-        return False, shift, centre, w, v, bound.modal_state(w, v)
+            return True, shift, w, v, None, None
+        return (False, shift, w, v, bound.modal_state(w, v),
+                (centre - elastic.half_width, centre + elastic.half_width))
 
     def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
                  which: Sequence[int] | None = None) -> list[float]:
@@ -456,7 +458,6 @@ class OpenGaps:
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         forces = forces or {}
-        elastic_ranges = self.elastic
         pairs = self._pairs(which)
         out = [0.0] * sum(len(p[2]) for p in pairs)
         dS = H / GRID
@@ -475,15 +476,15 @@ class OpenGaps:
                     else:
                         state = self._state(b, bound, reads)
                         self._states[b] = (key, state)
-                    yielding, shift, centre, w, v, modal = state
+                    yielding, shift, w, v, modal, band = state
                     if yielding:
                         s = linear[b] = 0.0         # no proof: base steps
                     else:
                         if callable(ground):
                             ground = ground()
                         motions[b] = FloorMotion(bound, w, v, H, ground, forces.get(b), shift, about=w, modal=modal)
-                        elastic = elastic_ranges.get(b)
-                        s = linear[b] = H if elastic is None else elastic.horizon(motions[b], centre, H)
+                        # ElasticRange.horizon, with the elastic ranges of this state
+                        s = linear[b] = H if band is None else band_horizon(*motions[b].drifts(), *band, H)
                 if s == 0.0:
                     break
             else:
