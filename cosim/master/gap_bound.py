@@ -61,6 +61,8 @@ ELASTIC_MARGIN = 1e-6
 #: drift beyond the elastic range (a yielding storey lies ELASTIC_MARGIN beyond it; the drift's
 #: round-off, ~1e-15 of the floor displacements, is far below 1e-9 of a yield drift)
 YIELDING_SLACK = 1e-9
+#: level groupings :meth:`OpenGaps._pairs` keeps (subsets of the levels a run asks for)
+_PAIRS_KEPT = 256
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
 _POINTS = np.arange(GRID + 1, dtype=float)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
@@ -360,7 +362,7 @@ class OpenGaps:
         self.buildings = buildings          # name -> (ModalBound, x index array, v index array)
         self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
         self.elastic = elastic or {}        # name -> ElasticRange, for the bilinear buildings
-        self._all_pairs = None
+        self._grouped: dict = {}            # which levels (None: all) -> _pairs
         # what a building's proof reads from System.y, in one gather: floors' x, v, residual drifts
         self._reads = {b: np.concatenate((ix, iv) + ((self.elastic[b].residual,) if b in self.elastic else ()))
                        for b, (_, ix, iv) in buildings.items()}
@@ -408,9 +410,13 @@ class OpenGaps:
 
     def _pairs(self, which: Sequence[int] | None) -> list[tuple[str, str, list[int], np.ndarray, np.ndarray, np.ndarray]]:
         """The levels (or those in ``which``) grouped by their two buildings: ``(left, right,
-        positions in the answer, left floors, right floors, gaps)``; all levels' grouping once."""
-        if which is None and self._all_pairs is not None:
-            return self._all_pairs
+        positions in the answer, left floors, right floors, gaps)``; each grouping once (a run
+        asks for all levels and a few subsets of them, at most ``2**levels``, kept while fewer
+        than :data:`_PAIRS_KEPT`)."""
+        key = None if which is None else tuple(which)
+        pairs = self._grouped.get(key)
+        if pairs is not None:
+            return pairs
         groups: dict = {}
         for pos, k in enumerate(range(len(self.levels)) if which is None else which):
             left, fl, right, fr, gap = self.levels[k]
@@ -422,8 +428,8 @@ class OpenGaps:
         pairs = [(left, right, pos, np.array(fl, dtype=np.intp), np.array(fr, dtype=np.intp),
                   np.array(gap, dtype=float)[:, None])
                  for (left, right), (pos, fl, fr, gap) in groups.items()]
-        if which is None:
-            self._all_pairs = pairs
+        if len(self._grouped) < _PAIRS_KEPT:
+            self._grouped[key] = pairs
         return pairs
 
     def _state(self, b: str, bound: ModalBound, reads: np.ndarray) -> tuple:
