@@ -276,3 +276,64 @@ def test_a_yielding_storey_has_no_proof():
     shift, centre = elastic.shift((1.0 - alpha) * slip)
     fm = FloorMotion(ModalBound(b), u_in, np.zeros(3), 0.1, constant_bound(0.0), None, shift)
     assert elastic.horizon(fm, centre, 0.1) > 0.0
+
+
+def test_open_gaps_reuse_of_a_building_state_answers_as_the_pieces_do():
+    """OpenGaps.horizons keeps each building's state (shift, yielding, modal coordinates) for the
+    step's other proofs: over a sequence of states (one repeated at other horizons, one with a
+    yielding storey, an earlier one again) every answer equals, bit for bit, what a fresh OpenGaps
+    gives and what the documented pieces give (ElasticRange.shift/yielding/horizon, FloorMotion,
+    open_horizon), so a reused state can never answer for another one."""
+    from cosim.master.gap_bound import ElasticRange, OpenGaps
+
+    cases = [yielding_case(seed) for seed in (4, 7)]
+    names = ("left", "right")
+    buildings, elastic, parts, offset = {}, {}, [], 0
+    for name, (b, law, alpha, dy, slip, u0, v0, H, knots, values, force) in zip(names, cases):
+        n = b.n
+        ix, iv, ir = (offset + np.arange(n) + k * n for k in range(3))
+        offset += 3 * n
+        buildings[name] = (ModalBound(b), ix, iv)
+        elastic[name] = ElasticRange(alpha, law.yield_drift(b.stiffnesses), ir)
+        parts.append((u0, v0, (1.0 - alpha) * slip, dy))
+    floor_l, floor_r = cases[0][0].n - 1, cases[1][0].n - 1
+    gap = 0.02
+    levels = [(names[0], floor_l, names[1], floor_r, gap)]
+
+    def state(scale, yield_left=False):
+        y = []
+        for i, (u0, v0, r, dy) in enumerate(parts):
+            u = np.cumsum(r) + scale * (u0 - np.cumsum(r))
+            if yield_left and i == 0:
+                u = u.copy()
+                u[0] = r[0] + 2.0 * dy[0]               # storey 1 beyond its elastic range
+            y += [u, scale * v0, r]
+        return np.concatenate(y)
+
+    def pieces(y, H, ground):
+        motions, s = {}, H
+        for name in names:
+            bound, ix, iv = buildings[name]
+            e = elastic[name]
+            shift, centre = e.shift(y)
+            if e.yielding(y[ix] - shift, centre):
+                return 0.0
+            motions[name] = FloorMotion(bound, y[ix], y[iv], H, ground, None, shift)
+            s = min(s, e.horizon(motions[name], centre, H))
+            if s == 0.0:
+                return 0.0
+        return min(s, open_horizon(motions["left"].floor(floor_l), motions["right"].floor(floor_r), gap, H))
+
+    reused = OpenGaps(buildings, levels, elastic)
+    sequence = [(0.5, False, 0.3), (0.5, False, 0.08), (0.5, False, 0.01), (1.0, False, 0.3),
+                (1.0, True, 0.3), (1.0, True, 0.08), (0.5, False, 0.3), (0.2, False, 0.16)]
+    answers = set()
+    for scale, yield_left, H in sequence:
+        y = state(scale, yield_left)
+        ground = constant_bound(1.0)
+        got = reused.horizons(y, H, ground)
+        assert got == OpenGaps(buildings, levels, elastic).horizons(y, H, ground)
+        assert got == [pieces(y, H, ground)], (scale, yield_left, H)
+        answers.add(got[0])
+    # the sequence exercises a yielding building (0) and proofs that hold, fully or in part
+    assert 0.0 in answers and len(answers) >= 3

@@ -61,8 +61,13 @@ ELASTIC_MARGIN = 1e-6
 #: drift beyond the elastic range (a yielding storey lies ELASTIC_MARGIN beyond it; the drift's
 #: round-off, ~1e-15 of the floor displacements, is far below 1e-9 of a yield drift)
 YIELDING_SLACK = 1e-9
+#: level groupings :meth:`OpenGaps._pairs` keeps (subsets of the levels a run asks for)
+_PAIRS_KEPT = 256
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
 _POINTS = np.arange(GRID + 1, dtype=float)
+#: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
+#: their overhead is its cost)
+_ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
 
 
 class ModalBound:
@@ -137,6 +142,14 @@ class ModalBound:
         out = self._tables[H] = (s, Ac, As, G, (self.abs_phi * gamma) @ G, (self.abs_rows * gamma) @ G)
         return out
 
+    def modal_state(self, u: np.ndarray, v: np.ndarray) -> list:
+        """What a free motion needs from the floors' state, whatever the horizon: ``[q, q' +
+        zeta w q]`` as columns (modal units), the bound ``sqrt(w_j^2 q_j^2 + q_j'^2)`` on each
+        mode's free rate, and a slot for the rows' rate bound (:class:`FloorMotion` fills it)."""
+        q = self.to_modal @ u
+        qd = self.to_modal @ v
+        return [q[:, None], (qd + self.zeta_w * q)[:, None], np.sqrt((self.w * q) ** 2 + qd * qd), None]
+
     def free_motion(self, u: np.ndarray, v: np.ndarray, H: float) -> tuple[np.ndarray, np.ndarray]:
         """``(Q, speed)``: the modal free motion ``q_j(s_k)`` (modes x points) from the floor
         displacements ``u`` and velocities ``v`` (m, m/s, relative to the ground) and the bound
@@ -155,14 +168,22 @@ class FloorMotion:
     first use: one matrix product per part instead of one per floor and level."""
 
     def __init__(self, bound: ModalBound, u: np.ndarray, v: np.ndarray, H: float,
-                 ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None):
+                 ground_bound: np.ndarray, force: np.ndarray | None, shift: np.ndarray | None = None,
+                 about: np.ndarray | None = None, modal: list | None = None):
         """``ground_bound[k]`` (m/s^2) bounds ``|ag|`` over ``[0, s_k]``; ``force`` (N, per floor)
         is held over the horizon (None: no force); ``shift`` (m, per floor) the static
-        displacement the modes move about (yielding storeys' slips, module docstring; None: 0)."""
+        displacement the modes move about (yielding storeys' slips, module docstring; None: 0);
+        ``about``, if given, is ``u - shift`` already computed, ``modal`` what
+        :meth:`ModalBound.modal_state` gave for it (the same numbers, not again)."""
         self.bound = bound
         self.shift = shift
-        self.Q, self.speed = bound.free_motion(u if shift is None else u - shift, v, H)
         cached = bound._cached(H)
+        if modal is None:
+            w = u if shift is None else (u - shift if about is None else about)
+            modal = bound.modal_state(w, v)
+        self._modal = modal
+        self.Q = cached[1] * modal[0] + cached[2] * modal[1]
+        self.speed = modal[2]
         self.G = cached[3]
         self.ground = ground_bound
         # the rows computed: the floors, and the storey drifts about a shift
@@ -170,7 +191,7 @@ class FloorMotion:
             self._rows, self._abs_rows, self._rows_ground = bound.phi, bound.abs_phi, cached[4]
         else:
             self._rows, self._abs_rows, self._rows_ground = bound.rows, bound.abs_rows, cached[5]
-        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and np.any(force) else None
+        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and force.any() else None
         self._all = self._floors = None
 
     def _rows_motion(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -179,7 +200,10 @@ class FloorMotion:
             forced = self._rows_ground * self.ground
             if self.modal_force is not None:
                 forced = forced + (self._abs_rows * self.modal_force) @ self.G
-            self._all = (free, forced, self._abs_rows @ self.speed)
+            rate = self._modal[3]
+            if rate is None:                # the rows' rate bound: the same for every horizon
+                rate = self._modal[3] = self._abs_rows @ self.speed
+            self._all = (free, forced, rate)
         return self._all
 
     def floors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -235,13 +259,16 @@ def band_horizon(free: np.ndarray, forced: np.ndarray, rate: np.ndarray, lo: np.
     inside ``(lo, hi)``, from :meth:`FloorMotion.drifts` (rows x points, per row) and the
     bounds ``lo``, ``hi`` per row (0 if a row is not inside now)."""
     x0 = free[:, 0]
-    if not ((x0 > lo).all() and (x0 < hi).all()):
+    if not _ALL(_AND(x0 > lo, x0 < hi)):
         return 0.0
     dS = H / GRID
     # interval k: the free part within its rate bound of the chord's mean, the forced at its end
-    mid = 0.5 * (free[:, :-1] + free[:, 1:])
+    mid = free[:, :-1] + free[:, 1:]
+    mid *= 0.5
     slack = 0.5 * dS * rate[:, None] + forced[:, 1:]
-    bad = ((mid + slack >= hi[:, None]) | (mid - slack <= lo[:, None])).any(axis=0)
+    bad = mid + slack >= hi[:, None]
+    bad |= mid - slack <= lo[:, None]
+    bad = _ANY(bad, axis=0)
     first = int(bad.argmax())
     return float(first) * dS if bad[first] else H
 
@@ -255,12 +282,16 @@ class ElasticRange:
         self.half_width = (1.0 - ELASTIC_MARGIN) * np.asarray(yield_drift, dtype=float)
         self.slack = YIELDING_SLACK * np.asarray(yield_drift, dtype=float)
         self.residual = residual
+        # computed once, not per proof (the same numbers: ``centre = factor * r`` and the sum
+        # of two constants)
+        self._centre_factor = self.alpha / (1.0 - self.alpha)
+        self._yielding_limit = self.half_width + self.slack
 
     def shift(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u_s, alpha s)``: the floors' static displacement about which the storeys are
         linear (m) and the centre of each storey's elastic range in ``D w`` (m)."""
         r = y[self.residual]
-        return np.cumsum(r), self.alpha / (1.0 - self.alpha) * r
+        return r.cumsum(), self._centre_factor * r
 
     def yielding(self, w: np.ndarray, centre: np.ndarray) -> bool:
         """A storey yields now, beyond doubt: its drift about the shift, from the floors' ``w =
@@ -270,7 +301,8 @@ class ElasticRange:
         a yielding building is proven again at every step and fails at once."""
         d = w.copy()
         d[1:] -= w[:-1]
-        return bool((np.abs(d - centre) >= self.half_width + self.slack).any())
+        d -= centre
+        return bool(_ANY(np.abs(d, out=d) >= self._yielding_limit))
 
     def horizon(self, motion: FloorMotion, centre: np.ndarray, H: float) -> float:
         """Longest ``s <= H`` (s) over which every storey provably stays elastic."""
@@ -282,17 +314,23 @@ def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) 
     """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
     must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
     s = t0 + H * _POINTS / GRID
-    out = np.maximum.accumulate(np.abs(np.interp(s, times, values)))
-    lo = np.searchsorted(times, t0, side="left")
-    hi = np.searchsorted(times, t0 + H, side="right")
+    out = np.abs(np.interp(s, times, values))
+    _MAX.accumulate(out, out=out)
+    lo = times.searchsorted(t0, side="left")
+    hi = times.searchsorted(t0 + H, side="right")
     if hi > lo:
         # a knot's value counts from the first grid point at or after it: the largest |value|
         # of the knots up to each grid point (a prefix maximum, sampled where each grid point falls)
         knots = times[lo:hi]
-        prefix = np.maximum.accumulate(np.abs(values[lo:hi]))
-        k = np.searchsorted(knots, s, side="right")          # knots at or before each grid point
-        reached = k > 0
-        out[reached] = np.maximum(out[reached], prefix[k[reached] - 1])
+        prefix = np.abs(values[lo:hi])
+        _MAX.accumulate(prefix, out=prefix)
+        # the grid points at or after the first knot (k > 0 there: k counts the knots at or
+        # before each grid point, and grows along the grid)
+        first = s.searchsorted(knots[0], side="left")
+        k = knots.searchsorted(s[first:], side="right")
+        k -= 1
+        tail = out[first:]
+        _MAX(tail, prefix[k], out=tail)
     return out
 
 
@@ -324,7 +362,13 @@ class OpenGaps:
         self.buildings = buildings          # name -> (ModalBound, x index array, v index array)
         self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
         self.elastic = elastic or {}        # name -> ElasticRange, for the bilinear buildings
-        self._all_pairs = None
+        self._grouped: dict = {}            # which levels (None: all) -> _pairs
+        # what a building's proof reads from System.y, in one gather: floors' x, v, residual drifts
+        self._reads = {b: np.concatenate((ix, iv) + ((self.elastic[b].residual,) if b in self.elastic else ()))
+                       for b, (_, ix, iv) in buildings.items()}
+        # building -> (its reads as bytes, _BuildingState): a step proves its gaps over a few
+        # horizons from the same state (the long step, the quiet horizon, the step)
+        self._states: dict = {}
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
@@ -366,9 +410,13 @@ class OpenGaps:
 
     def _pairs(self, which: Sequence[int] | None) -> list[tuple[str, str, list[int], np.ndarray, np.ndarray, np.ndarray]]:
         """The levels (or those in ``which``) grouped by their two buildings: ``(left, right,
-        positions in the answer, left floors, right floors, gaps)``; all levels' grouping once."""
-        if which is None and self._all_pairs is not None:
-            return self._all_pairs
+        positions in the answer, left floors, right floors, gaps)``; each grouping once (a run
+        asks for all levels and a few subsets of them, at most ``2**levels``, kept while fewer
+        than :data:`_PAIRS_KEPT`)."""
+        key = None if which is None else tuple(which)
+        pairs = self._grouped.get(key)
+        if pairs is not None:
+            return pairs
         groups: dict = {}
         for pos, k in enumerate(range(len(self.levels)) if which is None else which):
             left, fl, right, fr, gap = self.levels[k]
@@ -377,11 +425,31 @@ class OpenGaps:
             g[1].append(fl)
             g[2].append(fr)
             g[3].append(gap)
-        pairs = [(left, right, pos, np.array(fl, dtype=np.intp), np.array(fr, dtype=np.intp), np.array(gap, dtype=float))
+        pairs = [(left, right, pos, np.array(fl, dtype=np.intp), np.array(fr, dtype=np.intp),
+                  np.array(gap, dtype=float)[:, None])
                  for (left, right), (pos, fl, fr, gap) in groups.items()]
-        if which is None:
-            self._all_pairs = pairs
+        if len(self._grouped) < _PAIRS_KEPT:
+            self._grouped[key] = pairs
         return pairs
+
+    def _state(self, b: str, bound: ModalBound, reads: np.ndarray) -> tuple:
+        """``(yielding, shift, w, v, modal, band)`` of building ``b`` from its reads (floors' x,
+        v and residual drifts): whether a storey yields now, the static shift (None for a
+        linear building), the floors' displacement about the shift, their velocities,
+        :meth:`ModalBound.modal_state` (None if yielding) and each storey's elastic range
+        ``(lo, hi)`` in ``D w`` (None for a linear building or a yielding one)."""
+        n = bound.n
+        u, v = reads[:n], reads[n:2 * n]
+        elastic = self.elastic.get(b)
+        if elastic is None:
+            return False, None, u, v, bound.modal_state(u, v), None
+        r = reads[2 * n:]
+        shift, centre = r.cumsum(), elastic._centre_factor * r     # ElasticRange.shift, from the reads
+        w = u - shift
+        if elastic.yielding(w, centre):
+            return True, shift, w, v, None, None
+        return (False, shift, w, v, bound.modal_state(w, v),
+                (centre - elastic.half_width, centre + elastic.half_width))
 
     def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
                  which: Sequence[int] | None = None) -> list[float]:
@@ -396,50 +464,51 @@ class OpenGaps:
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         forces = forces or {}
-        lazy = [ground] if callable(ground) else None
-
-        def ground_bound():
-            if lazy is None:
-                return ground
-            if callable(lazy[0]):
-                lazy[0] = lazy[0]()
-            return lazy[0]
-
-        def linear_for(b):
-            s = linear.get(b)
-            if s is None:
-                bound, ix, iv = self.buildings[b]
-                elastic = self.elastic.get(b)
-                if elastic is None:
-                    motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b))
-                    s = linear[b] = H
-                else:
-                    shift, centre = elastic.shift(y)
-                    if elastic.yielding(y[ix] - shift, centre):
-                        s = linear[b] = 0.0         # no proof: base steps
-                    else:
-                        motions[b] = FloorMotion(bound, y[ix], y[iv], H, ground_bound(), forces.get(b), shift)
-                        s = linear[b] = elastic.horizon(motions[b], centre, H)
-            return s
-
         pairs = self._pairs(which)
         out = [0.0] * sum(len(p[2]) for p in pairs)
         dS = H / GRID
         for left, right, positions, fl, fr, gap in pairs:
-            s = linear_for(left)
-            if s == 0.0 or (s := min(s, linear_for(right))) == 0.0:
-                continue
-            xl, bl, ll = motions[left].floors()
-            xr, br, lr = motions[right].floors()
-            delta = xl[fl] - xr[fr] - gap[:, None]
-            # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
-            upper = (0.5 * (delta[:, :-1] + delta[:, 1:]) + (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
-                     + bl[fl, 1:] + br[fr, 1:])
-            bad = upper >= 0.0
-            first = bad.argmax(axis=1)
-            closed = delta[:, 0] >= 0.0
-            for i, pos in enumerate(positions):
-                if closed[i]:
-                    continue
-                out[pos] = min(s, float(first[i]) * dS if bad[i, first[i]] else H)
+            for b in (left, right):
+                s = linear.get(b)
+                if s is None:
+                    # how long building b provably stays linear (a yielding one ends the proof
+                    # before its motion, and the ground bound, is computed)
+                    bound, ix, iv = self.buildings[b]
+                    reads = y[self._reads[b]]
+                    key = reads.tobytes()
+                    known = self._states.get(b)
+                    if known is not None and known[0] == key:
+                        state = known[1]
+                    else:
+                        state = self._state(b, bound, reads)
+                        self._states[b] = (key, state)
+                    yielding, shift, w, v, modal, band = state
+                    if yielding:
+                        s = linear[b] = 0.0         # no proof: base steps
+                    else:
+                        if callable(ground):
+                            ground = ground()
+                        motions[b] = FloorMotion(bound, w, v, H, ground, forces.get(b), shift, about=w, modal=modal)
+                        # ElasticRange.horizon, with the elastic ranges of this state
+                        s = linear[b] = H if band is None else band_horizon(*motions[b].drifts(), *band, H)
+                if s == 0.0:
+                    break
+            else:
+                s = min(linear[left], linear[right])
+                xl, bl, ll = motions[left].floors()
+                xr, br, lr = motions[right].floors()
+                delta = xl[fl] - xr[fr] - gap
+                # interval k: the free part's largest value <= mean of its ends + L dS / 2; forced part at its end
+                upper = delta[:, :-1] + delta[:, 1:]
+                upper *= 0.5
+                upper += (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
+                upper += bl[fl, 1:]
+                upper += br[fr, 1:]
+                bad = upper >= 0.0
+                first = bad.argmax(axis=1).tolist()
+                hit = _ANY(bad, axis=1).tolist()
+                closed = (delta[:, 0] >= 0.0).tolist()
+                for pos, c, f, h in zip(positions, closed, first, hit):
+                    if not c:
+                        out[pos] = min(s, float(f) * dS if h else H)
         return out
