@@ -222,6 +222,29 @@ def _force_polyline(trajectories: list[ContactTrajectory]) -> tuple[np.ndarray, 
     return t[order], f[order]
 
 
+def _step_inputs(windows, model, building: str, floor: int, k: int, force_t: np.ndarray, force: np.ndarray,
+                 sign: float, mine_held: float, f_held: np.ndarray):
+    """What a building was given over the logged step ``k`` (:func:`_exact_in_step`): the step's
+    ends (s), its floors' displacements and velocities at the start, the ground acceleration
+    (times, m/s^2), the contact force's polyline inside the step (its inner times, then knots
+    with the step's ends, N) and the held floor forces without this contact's held mean (N)."""
+    t0, t1 = float(windows.t0[k]), float(windows.t1[k])
+    floors = range(1, model.n + 1)
+    u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
+    v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
+    g_times, g_values = windows.inputs[building].ground(k, t0, t1)
+    # the contact's force inside the step: its polyline, cut at the step's ends (a point on an
+    # end belongs to both steps)
+    inside = (force_t > t0) & (force_t < t1)
+    tp = force_t[inside]
+    knots_t = np.concatenate(([t0], tp, [t1]))
+    knots_f = np.concatenate(([np.interp(t0, force_t, force, 0.0, 0.0)], force[inside],
+                              [np.interp(t1, force_t, force, 0.0, 0.0)]))
+    base = f_held.copy()
+    base[floor - 1] -= sign * mine_held
+    return t0, t1, u0, v0, g_times, g_values, tp, knots_t, knots_f, base
+
+
 def _exact_in_step(windows, model, building: str, floor: int, k: int, force_t: np.ndarray, force: np.ndarray,
                    sign: float, mine_held: float, f_held: np.ndarray, config: Configuration | None = None) -> float:
     """Largest |absolute acceleration| of ``floor`` over the logged step ``k``: the linear
@@ -234,24 +257,12 @@ def _exact_in_step(windows, model, building: str, floor: int, k: int, force_t: n
     (:class:`fmu_src.linear_response.Configuration`: ``z' = A z + b0 + b1 s`` in modal
     coordinates, ``config`` the building's elastic one, built here if not given); evaluated at
     ``_STEP_POINTS`` points of the step and at every knot."""
-    t0, t1 = float(windows.t0[k]), float(windows.t1[k])
     n = model.n
     if config is None:
         config = elastic_configuration(model)
-    floors = range(1, n + 1)
-    u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
-    v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
-    g_times, g_values = windows.inputs[building].ground(k, t0, t1)
-    # the contact's force inside the step: its polyline, cut at the step's ends (a point on an
-    # end belongs to both steps)
-    inside = (force_t > t0) & (force_t < t1)
-    tp = force_t[inside]
-    knots_t = np.concatenate(([t0], tp, [t1]))
-    knots_f = np.concatenate(([np.interp(t0, force_t, force, 0.0, 0.0)], force[inside],
-                              [np.interp(t1, force_t, force, 0.0, 0.0)]))
+    t0, t1, u0, v0, g_times, g_values, tp, knots_t, knots_f, base = _step_inputs(
+        windows, model, building, floor, k, force_t, force, sign, mine_held, f_held)
     minv = 1.0 / model.masses
-    base = f_held.copy()
-    base[floor - 1] -= sign * mine_held
     f = floor - 1
     # segments between every knot of either input; each input is linear inside a segment, read at
     # two inner points (a knot shared by a jump of the record is then taken from the right side)
@@ -299,20 +310,10 @@ def _integrated_in_step(windows, model, building: str, floor: int, k: int, force
                         sign: float, mine_held: float, f_held: np.ndarray, config=None) -> float:
     """:func:`_exact_in_step` by ``solve_ivp`` (DOP853, rtol 1e-10) where the closed form is
     refused (:func:`elastic_configuration`)."""
-    t0, t1 = float(windows.t0[k]), float(windows.t1[k])
     n = model.n
-    floors = range(1, n + 1)
-    u0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("x", i)))] for i in floors])
-    v0 = np.array([windows.start[k, windows.columns.index(column(building, element_name("v", i)))] for i in floors])
-    g_times, g_values = windows.inputs[building].ground(k, t0, t1)
-    inside = (force_t > t0) & (force_t < t1)
-    tp = force_t[inside]
-    knots_t = np.concatenate(([t0], tp, [t1]))
-    knots_f = np.concatenate(([np.interp(t0, force_t, force, 0.0, 0.0)], force[inside],
-                              [np.interp(t1, force_t, force, 0.0, 0.0)]))
+    t0, t1, u0, v0, g_times, g_values, tp, knots_t, knots_f, base = _step_inputs(
+        windows, model, building, floor, k, force_t, force, sign, mine_held, f_held)
     K, C, minv = model.K, model.C, 1.0 / model.masses
-    base = f_held.copy()
-    base[floor - 1] -= sign * mine_held
 
     def forces(tt):
         f = base.copy()
