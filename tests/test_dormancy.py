@@ -21,6 +21,25 @@ from fmu_src.resolver import ImpactResolver
 from scenario_checks import simulate_scene
 from test_coupling_without_fmus import FakeFmu, building
 
+#: the relative motion of the resolver-only tests: ``delta = -25 mm + 10 mm sin(12 t)``, a gap
+#: that never closes (m, m/s), and the times at which the contact falls asleep (s)
+SLEEP_TIMES = np.arange(0.5, 1.2, 0.1)
+
+
+def open_motion(t: float) -> tuple[float, float]:
+    return -0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t)
+
+
+def resolver_after_base_steps(t_sleep: float):
+    """A Jankowski contact that followed :func:`open_motion` in 10 ms steps up to ``t_sleep``:
+    the resolver and the time it has reached (s)."""
+    r = ImpactResolver(law_for("jankowski", 2.75e9, 1.5, 3e5, 3e5, 0.65, -1.0))
+    t = 0.0
+    while t < t_sleep - 1e-9:
+        r.step(*open_motion(t), 0.01)
+        t += 0.01
+    return r, t
+
 
 # -- every bundled scene -------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", bundled_scenes())
@@ -120,15 +139,10 @@ def test_hermite_states_inside_a_long_skipped_step():
         u = hermite(u0, u1, np.array([0]), np.array([1]), h, s)
         np.testing.assert_allclose(u, [x(s * h), v(s * h)], rtol=0, atol=1e-15)
     # the sleeping contact's catch-up of a long quiet step, cut as the master cuts it
-    law = law_for("jankowski", 2.75e9, 1.5, 3e5, 3e5, 0.65, -1.0)
-    delta = lambda t: np.array([-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t)])
+    delta = lambda t: np.array(open_motion(t))
     count = 0
-    for t_sleep in np.arange(0.5, 1.2, 0.1):
-        r = ImpactResolver(law)
-        t = 0.0
-        while t < t_sleep - 1e-9:
-            r.step(*delta(t), 0.01)
-            t += 0.01
+    for t_sleep in SLEEP_TIMES:
+        r, t = resolver_after_base_steps(t_sleep)
         for j in range(8):
             count += r.step(*hermite(delta(t), delta(t + h), np.array([0]), np.array([1]), h, j / 8), h / 8).impacts_started
     assert count == 0 and spurious_onsets(0.32) > 0
@@ -261,15 +275,10 @@ def test_a_catch_up_costs_three_doSteps_at_a_coarse_base_step(catalog, monkeypat
 def spurious_onsets(long_step: float) -> int:
     """Impacts a resolved contact starts in one step of ``long_step`` s after 10 ms steps of a
     relative motion ``delta = -25 mm + 10 mm sin(12 t)`` whose gap never closes."""
-    law = law_for("jankowski", 2.75e9, 1.5, 3e5, 3e5, 0.65, -1.0)
     count = 0
-    for t_sleep in np.arange(0.5, 1.2, 0.1):
-        r = ImpactResolver(law)
-        t = 0.0
-        while t < t_sleep - 1e-9:
-            r.step(-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t), 0.01)
-            t += 0.01
-        count += r.step(-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t), long_step).impacts_started
+    for t_sleep in SLEEP_TIMES:
+        r, t = resolver_after_base_steps(t_sleep)
+        count += r.step(*open_motion(t), long_step).impacts_started
     return count
 
 
@@ -388,15 +397,10 @@ def test_an_undeclared_long_step_starts_impacts_a_declared_one_does_not():
     """The spurious onsets of a 0.32 s step (spurious_onsets below) are the extrapolation of the
     structures' motion over it: declared open, the same step starts none and gives no force,
     and the contact's reported state is the host's at the step start."""
-    law = law_for("jankowski", 2.75e9, 1.5, 3e5, 3e5, 0.65, -1.0)
-    delta = lambda t: (-0.025 + 0.01 * math.sin(12 * t), 0.12 * math.cos(12 * t))
+    delta = open_motion
     declared = 0
-    for t_sleep in np.arange(0.5, 1.2, 0.1):
-        r = ImpactResolver(law)
-        t = 0.0
-        while t < t_sleep - 1e-9:
-            r.step(*delta(t), 0.01)
-            t += 0.01
+    for t_sleep in SLEEP_TIMES:
+        r, t = resolver_after_base_steps(t_sleep)
         out = r.step(*delta(t), 0.32, gap_open=True)
         declared += out.impacts_started
         assert out.impulse == 0.0 and (r.delta_end, r.delta_dot_end) == delta(t) and not r.in_contact
