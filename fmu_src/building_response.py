@@ -232,13 +232,10 @@ class BuildingIntegrator:
         """``M^-1 (f - C v - D' V)`` (m/s^2)."""
         return (np.asarray(force, float) - self.C @ state.v - _floor_forces(self.storey_shear(state))) / self.masses
 
-    def response(self, state: BuildingState, force, acceleration: bool = True):
-        """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes);
-        ``a`` is None with ``acceleration=False`` (a caller that computes it its own way)."""
+    def response(self, state: BuildingState, force):
+        """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes)."""
         d = _drift(state.u)
         V, strain = self._shear_and_strain(state, d)
-        if not acceleration:
-            return d, V, None, strain
         a = (force - self.C @ state.v - _floor_forces(V)) / self.masses
         return d, V, a, strain
 

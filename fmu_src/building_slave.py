@@ -300,33 +300,23 @@ class Building(Fmi2Slave):
             self.base_shear = float(k[0] * drift[0])
             self.E_kinetic = 0.5 * float(v @ (self._building.masses * v))
             self.E_strain = 0.5 * float(k @ (drift * drift))
-            self.E_input = state.E_input
-            self.E_external = state.E_external
-            self.E_damping = state.E_damping
-            self.E_hysteretic = state.E_hysteretic
-            self._derived_cache = None
-            self._shear_fresh = False
-            return
-        drift, V, accel, strain = self._integrator.response(state, force, acceleration=not self._legacy)
-        self.x[:n] = state.u
-        self.v[:n] = state.v
-        self.drift[:n] = drift
-        if not self._legacy:   # d - V / k (fmu_src/hysteresis.py); a linear storey's stays 0
-            self.drift_residual[:n] = drift - V / self._building.stiffnesses
-        if self._legacy:   # as the linear model always computed it (bit for bit)
-            self.a[:n] = self._R @ np.concatenate([state.u, state.v]) + force / self._building.masses
         else:
+            drift, V, accel, strain = self._integrator.response(state, force)
+            self.x[:n] = state.u
+            self.v[:n] = state.v
+            self.drift[:n] = drift
+            self.drift_residual[:n] = drift - V / self._building.stiffnesses   # d - V / k (fmu_src/hysteresis.py)
             self.a[:n] = accel
-        self.base_shear = float(V[0])
-        self._derived_block[0, :n] = V      # the V output (_shear_row), computed here anyway
-        self.E_kinetic = 0.5 * float(state.v @ (self._building.masses * state.v))
-        self.E_strain = strain
+            self.base_shear = float(V[0])
+            self._derived_block[0, :n] = V      # the V output (_shear_row), computed here anyway
+            self.E_kinetic = 0.5 * float(state.v @ (self._building.masses * state.v))
+            self.E_strain = strain
         self.E_input = state.E_input
         self.E_external = state.E_external
         self.E_damping = state.E_damping
         self.E_hysteretic = state.E_hysteretic
         self._derived_cache = None
-        self._shear_fresh = True
+        self._shear_fresh = not self._legacy
 
     # -- stepping ----------------------------------------------------------------------------
     def _zoh_entry(self, step_size: float):

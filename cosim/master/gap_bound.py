@@ -290,8 +290,15 @@ class ElasticRange:
     def shift(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u_s, alpha s)``: the floors' static displacement about which the storeys are
         linear (m) and the centre of each storey's elastic range in ``D w`` (m)."""
-        r = y[self.residual]
+        return self.shift_of(y[self.residual])
+
+    def shift_of(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`shift` from the residual drifts ``r`` (m) already read."""
         return r.cumsum(), self._centre_factor * r
+
+    def band(self, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each storey's elastic range ``(lo, hi)`` in ``D w`` (m) about its ``centre``."""
+        return centre - self.half_width, centre + self.half_width
 
     def yielding(self, w: np.ndarray, centre: np.ndarray) -> bool:
         """A storey yields now, beyond doubt: its drift about the shift, from the floors' ``w =
@@ -306,8 +313,7 @@ class ElasticRange:
 
     def horizon(self, motion: FloorMotion, centre: np.ndarray, H: float) -> float:
         """Longest ``s <= H`` (s) over which every storey provably stays elastic."""
-        free, forced, rate = motion.drifts()
-        return band_horizon(free, forced, rate, centre - self.half_width, centre + self.half_width, H)
+        return band_horizon(*motion.drifts(), *self.band(centre), H)
 
 
 def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
@@ -444,12 +450,11 @@ class OpenGaps:
         if elastic is None:
             return False, None, u, v, bound.modal_state(u, v), None
         r = reads[2 * n:]
-        shift, centre = r.cumsum(), elastic._centre_factor * r     # ElasticRange.shift, from the reads
+        shift, centre = elastic.shift_of(r)
         w = u - shift
         if elastic.yielding(w, centre):
             return True, shift, w, v, None, None
-        return (False, shift, w, v, bound.modal_state(w, v),
-                (centre - elastic.half_width, centre + elastic.half_width))
+        return False, shift, w, v, bound.modal_state(w, v), elastic.band(centre)
 
     def horizons(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict | None = None,
                  which: Sequence[int] | None = None) -> list[float]:
@@ -489,7 +494,7 @@ class OpenGaps:
                         if callable(ground):
                             ground = ground()
                         motions[b] = FloorMotion(bound, w, v, H, ground, forces.get(b), shift, about=w, modal=modal)
-                        # ElasticRange.horizon, with the elastic ranges of this state
+                        # ElasticRange.horizon, with the elastic ranges this state keeps
                         s = linear[b] = H if band is None else band_horizon(*motions[b].drifts(), *band, H)
                 if s == 0.0:
                     break

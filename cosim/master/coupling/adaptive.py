@@ -299,10 +299,11 @@ class Adaptive(CouplingStrategy):
             level += 1
         return level
 
-    def _active(self, lv) -> bool:
-        """A contact that has something to do now: a force, a closed gap (its own or the host's)."""
+    def _active(self, lv, kinematics) -> bool:
+        """A contact that has something to do now: a force, a closed gap (its own, or the host's:
+        ``kinematics``, the level's ``(delta, rate, its rate)`` now)."""
         y = self.system.y
-        return y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or lv.kinematics(y)[0] >= 0.0
+        return y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or kinematics[0] >= 0.0
 
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, closures)``: the longest safe step (s) and, for each gap that may close,
@@ -394,8 +395,7 @@ class Adaptive(CouplingStrategy):
             # each level's kinematics and whether it has something to do, once per try (the
             # floors do not move before the buildings step, a contact's outputs not before it does)
             self._kinematics = start = [lv.kinematics(y) for lv in self.levels]
-            self._now_active = [y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or k[0] >= 0.0
-                                for lv, k in zip(self.levels, start)]
+            self._now_active = [self._active(lv, k) for lv, k in zip(self.levels, start)]
             h_target, closures = self._plan()
             level = max(self._dyadic_level(min(h_target, cap)), finest)
             level = max(level, max(self._level, 0) - 1)          # grow by at most a factor 2 (below h_base)
