@@ -313,12 +313,14 @@ class SlaveBase(Fmi2Slave):
         self._real_outputs: list[tuple[Variable, str, int | None]] = []
         self._checked: list[tuple[Variable, str, int | None]] = []
         arrays: dict[str, int] = {}
+        strings: set[str] = set()           # arrays with String elements (one pass, not one per array)
         for var in self.VARIABLES:
             if var.index is not None:
                 arrays[var.attribute] = max(arrays.get(var.attribute, 0), var.index + 1)
+                if var.type == "String":
+                    strings.add(var.attribute)
         for attr, size in arrays.items():
-            dtype = object if any(v.attribute == attr and v.type == "String" for v in self.VARIABLES) else float
-            setattr(self, attr, np.zeros(size, dtype=dtype))
+            setattr(self, attr, np.zeros(size, dtype=object if attr in strings else float))
         for var in self.VARIABLES:
             self._register(var)
             slot = (var, var.attribute, var.index)
