@@ -61,6 +61,11 @@ ELASTIC_MARGIN = 1e-6
 #: drift beyond the elastic range (a yielding storey lies ELASTIC_MARGIN beyond it; the drift's
 #: round-off, ~1e-15 of the floor displacements, is far below 1e-9 of a yield drift)
 YIELDING_SLACK = 1e-9
+#: the storey force bound of a yielding building is widened by this fraction:
+#: ``|q| = (1 - alpha) k |d - s|`` may pass ``(1 - alpha) Fy`` by the overshoot of a located yield
+#: event (building.fmu locates it to 1e-12 of the step: ``|d'| 1e-12 h``, below 1e-9 of a yield
+#: drift) and by the round-off of ``d - s`` (~1e-15 of the drifts)
+PLASTIC_MARGIN = 1e-6
 #: level groupings :meth:`OpenGaps._pairs` keeps (subsets of the levels a run asks for)
 _PAIRS_KEPT = 256
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
@@ -71,11 +76,19 @@ _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical
 
 
 class ModalBound:
-    """A linear building's modes, for bounding its floors' motion over a step (module docstring)."""
+    """A linear building's modes, for bounding its floors' motion over a step (module docstring).
 
-    def __init__(self, building: ShearBuilding):
+    ``stiffness_factor`` and ``plastic_shear`` make the bound of a yielding building
+    (:meth:`through_yielding`): the stiffness ``stiffness_factor K`` with the damping ``C`` of
+    the building (the same modes, ``w_j sqrt(factor)``), loaded besides by storey forces of at
+    most ``plastic_shear`` (N, per storey) in size, whatever their history."""
+
+    def __init__(self, building: ShearBuilding, stiffness_factor: float = 1.0,
+                 plastic_shear: np.ndarray | None = None):
         phi = np.asarray(building.mode_shapes, dtype=float)
         w = np.asarray(building.omegas, dtype=float)
+        if stiffness_factor != 1.0:
+            w = w * math.sqrt(stiffness_factor)
         masses = np.asarray(building.masses, dtype=float)
         modal_c = phi.T @ building.C @ phi
         off = modal_c - np.diag(np.diag(modal_c))
@@ -89,14 +102,28 @@ class ModalBound:
         c = np.diag(modal_c)
         with np.errstate(divide="ignore", invalid="ignore"):
             self.zeta = np.where(w > 0.0, c / (2.0 * np.where(w > 0.0, w, 1.0)), 0.0)
-        self.zeta_w = self.zeta * self.w
+        # zeta w = c / 2; a zero-stiffness mode (w = 0) keeps its damping c there: q'' + c q' = 0
+        self.damping = np.where(w > 0.0, 0.0, np.maximum(c, 0.0))
+        self.zeta_w = np.where(w > 0.0, self.zeta * self.w, 0.5 * self.damping)
         self.drift_phi = phi.copy()                # storey drifts d = D u: D Phi
         self.drift_phi[1:] -= phi[:-1]
         self.abs_phi = np.abs(phi)
         self.abs_drift_phi = np.abs(self.drift_phi)
         self.rows = np.vstack((phi, self.drift_phi))     # floors then storey drifts, in one product
         self.abs_rows = np.abs(self.rows)
+        # the bound on each mode's share of the storey forces D' rho, |rho_i| <= plastic_shear_i:
+        # sum_i |(D phi_j)_i| plastic_shear_i (N per unit modal mass, m/s^2 in modal units)
+        self.plastic = None if plastic_shear is None else \
+            self.abs_drift_phi.T @ np.asarray(plastic_shear, dtype=float)
         self._tables: dict[float, tuple[np.ndarray, ...]] = {}
+
+    @classmethod
+    def through_yielding(cls, building: ShearBuilding, alpha: float, yield_shear) -> "ModalBound":
+        """The bound of a bilinear building (kinematic hardening, :mod:`fmu_src.hysteresis`) that
+        holds whatever its storeys do: ``V = alpha k d + rho`` with ``|rho| <= (1 - alpha) Fy``
+        (module docstring, *Through yielding*), widened by :data:`PLASTIC_MARGIN`."""
+        plastic = (1.0 - float(alpha)) * np.asarray(yield_shear, dtype=float) * (1.0 + PLASTIC_MARGIN)
+        return cls(building, float(alpha), plastic)
 
     # -- the free motion and the forced bound on a grid of s = H k / GRID ------------------------------
     def tables(self, H: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -117,8 +144,12 @@ class ModalBound:
         As = np.tile(s, (self.n, 1))
         for j in range(self.n):
             wj, zj = self.w[j], self.zeta[j]
-            if wj == 0.0:                          # a free mass: q = q0 + q0' s
-                continue
+            if wj == 0.0:
+                cj = self.damping[j]
+                if cj > 0.0:                       # q'' + c q' = 0: q = q0 + q0' (1 - exp(-c s)) / c
+                    As[j] = -np.expm1(-cj * s) / cj
+                    Ac[j] = 1.0 - self.zeta_w[j] * As[j]
+                continue                           # undamped, a free mass: q = q0 + q0' s
             decay = np.exp(-zj * wj * s)
             if zj < 1.0:
                 wd = wj * math.sqrt(1.0 - zj * zj)
@@ -131,15 +162,19 @@ class ModalBound:
             else:
                 Ac[j] = decay
                 As[j] = decay * s
-        G = np.tile(0.5 * s * s, (self.n, 1))     # |h| <= r: a free mass (w = 0) has no other bound
+        G = np.tile(0.5 * s * s, (self.n, 1))     # |h| <= r: an undamped free mass has no other bound
         for j in range(self.n):
-            if self.w[j] > 0.0:
-                knee = 1.0 / self.w[j]                 # beyond r = 1/w, |h| <= 1/w
+            # beyond r = 1/w, |h| <= 1/w; a damped free mass: h = (1 - exp(-c r)) / c <= 1/c
+            rate = self.w[j] if self.w[j] > 0.0 else self.damping[j]
+            if rate > 0.0:
+                knee = 1.0 / rate
                 G[j] = np.where(s <= knee, 0.5 * s * s, 0.5 * knee * knee + (s - knee) * knee)
         if len(self._tables) > 64:                # a bounded number of distinct step lengths
             self._tables.pop(next(iter(self._tables)))
         gamma = np.abs(self.gamma)
-        out = self._tables[H] = (s, Ac, As, G, (self.abs_phi * gamma) @ G, (self.abs_rows * gamma) @ G)
+        # the storey forces' bound on every floor (floors x points), as the ground's, unscaled
+        plastic = None if self.plastic is None else (self.abs_phi * self.plastic) @ G
+        out = self._tables[H] = (s, Ac, As, G, (self.abs_phi * gamma) @ G, (self.abs_rows * gamma) @ G, plastic)
         return out
 
     def modal_state(self, u: np.ndarray, v: np.ndarray) -> list:
@@ -192,6 +227,8 @@ class FloorMotion:
         else:
             self._rows, self._abs_rows, self._rows_ground = bound.rows, bound.abs_rows, cached[5]
         self.modal_force = np.abs(bound.phi.T @ force) if force is not None and force.any() else None
+        # a yielding building's storey forces (ModalBound.through_yielding), on the floors only
+        self._plastic = cached[6] if shift is None else None
         self._all = self._floors = None
 
     def _rows_motion(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -200,6 +237,8 @@ class FloorMotion:
             forced = self._rows_ground * self.ground
             if self.modal_force is not None:
                 forced = forced + (self._abs_rows * self.modal_force) @ self.G
+            if self._plastic is not None:
+                forced = forced + self._plastic
             rate = self._modal[3]
             if rate is None:                # the rows' rate bound: the same for every horizon
                 rate = self._modal[3] = self._abs_rows @ self.speed
@@ -234,6 +273,8 @@ class FloorMotion:
         forced = (bound.abs_drift_phi * np.abs(bound.gamma)) @ self.G * self.ground
         if self.modal_force is not None:
             forced = forced + (bound.abs_drift_phi * self.modal_force) @ self.G
+        if bound.plastic is not None:
+            forced = forced + (bound.abs_drift_phi * bound.plastic) @ self.G
         return bound.drift_phi @ self.Q, forced, bound.abs_drift_phi @ self.speed
 
 
@@ -364,10 +405,11 @@ class OpenGaps:
     A bilinear building's proof holds while its storeys are proven elastic (:class:`ElasticRange`).
     """
 
-    def __init__(self, buildings: dict, levels: list, elastic: dict | None = None):
+    def __init__(self, buildings: dict, levels: list, elastic: dict | None = None, yielded: dict | None = None):
         self.buildings = buildings          # name -> (ModalBound, x index array, v index array)
         self.levels = levels                # (left, floor index, right, floor index, gap), per contact level
         self.elastic = elastic or {}        # name -> ElasticRange, for the bilinear buildings
+        self.yielded = yielded or {}        # name -> ModalBound.through_yielding, for the bilinear buildings
         self._grouped: dict = {}            # which levels (None: all) -> _pairs
         # what a building's proof reads from System.y, in one gather: floors' x, v, residual drifts
         self._reads = {b: np.concatenate((ix, iv) + ((self.elastic[b].residual,) if b in self.elastic else ()))
@@ -382,7 +424,7 @@ class OpenGaps:
         from .names import column, element_name
 
         index = {c: i for i, c in enumerate(system.columns[:system.y.size])}
-        buildings, elastic = {}, {}
+        buildings, elastic, yielded = {}, {}, {}
         for node in system.buildings:
             linear = storeys_are_linear(node.spec)
             if not linear and storey_hysteresis(node.spec).model != "bilinear":
@@ -401,12 +443,13 @@ class OpenGaps:
                 law = storey_hysteresis(node.spec)
                 elastic[node.name] = ElasticRange(law.alpha, law.yield_drift(building.stiffnesses),
                                                   floors("drift_residual"))
+                yielded[node.name] = ModalBound.through_yielding(building, law.alpha, law.yield_shear)
         where = {lv.instance: lv for lv in system.scene.levels}
         levels = []
         for lv in contact_levels:
             level = where[lv.name]
             levels.append((level.left, level.floor_left - 1, level.right, level.floor_right - 1, lv.gap))
-        return cls(buildings, levels, elastic)
+        return cls(buildings, levels, elastic, yielded)
 
     def columns(self, system) -> list[str]:
         """The Real outputs the proof reads: every floor's displacement and velocity, and the
@@ -462,43 +505,52 @@ class OpenGaps:
         stays open from now, with ``ground[k]`` bounding ``|ag|`` up to grid point ``k`` and
         ``forces`` (building -> force per floor, N) held over the horizon.  ``ground`` may be
         a function that returns it: called once, only if a building's motion is needed (a
-        yielding building ends the proof before).
+        yielding building ends the linear proof before).
 
         The levels between the same two buildings are proven together (one array operation
-        each, as :func:`open_horizon` does for one level, with the same arithmetic)."""
+        each, as :func:`open_horizon` does for one level, with the same arithmetic).  A level
+        of a bilinear building that this linear proof leaves short of ``H`` is proven again
+        through yielding (:meth:`_through_yielding`), and keeps the longer horizon."""
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         forces = forces or {}
         pairs = self._pairs(which)
         out = [0.0] * sum(len(p[2]) for p in pairs)
         dS = H / GRID
-        for left, right, positions, fl, fr, gap in pairs:
-            for b in (left, right):
-                s = linear.get(b)
-                if s is None:
-                    # how long building b provably stays linear (a yielding one ends the proof
-                    # before its motion, and the ground bound, is computed)
-                    bound, ix, iv = self.buildings[b]
-                    reads = y[self._reads[b]]
-                    key = reads.tobytes()
-                    known = self._states.get(b)
-                    if known is not None and known[0] == key:
-                        state = known[1]
-                    else:
-                        state = self._state(b, bound, reads)
-                        self._states[b] = (key, state)
-                    yielding, shift, w, v, modal, band = state
-                    if yielding:
-                        s = linear[b] = 0.0         # no proof: base steps
-                    else:
-                        if callable(ground):
-                            ground = ground()
-                        motions[b] = FloorMotion(bound, w, v, H, ground, forces.get(b), shift, about=w, modal=modal)
-                        # ElasticRange.horizon, with the elastic ranges this state keeps
-                        s = linear[b] = H if band is None else band_horizon(*motions[b].drifts(), *band, H)
-                if s == 0.0:
-                    break
+        bounds = [ground]                   # the ground bound, once evaluated
+
+        def ground_bound():
+            if callable(bounds[0]):
+                bounds[0] = bounds[0]()
+            return bounds[0]
+
+        def prove_linear(b: str) -> float:
+            """How long building b provably stays linear (a yielding one ends the proof before its
+            motion, and the ground bound, is computed); its motion kept in ``motions``."""
+            s = linear.get(b)
+            if s is not None:
+                return s
+            bound, ix, iv = self.buildings[b]
+            reads = y[self._reads[b]]
+            key = reads.tobytes()
+            known = self._states.get(b)
+            if known is not None and known[0] == key:
+                state = known[1]
             else:
+                state = self._state(b, bound, reads)
+                self._states[b] = (key, state)
+            yielding, shift, w, v, modal, band = state
+            if yielding:
+                s = linear[b] = 0.0         # no linear proof
+            else:
+                motions[b] = FloorMotion(bound, w, v, H, ground_bound(), forces.get(b), shift, about=w, modal=modal)
+                # ElasticRange.horizon, with the elastic ranges this state keeps
+                s = linear[b] = H if band is None else band_horizon(*motions[b].drifts(), *band, H)
+            return s
+
+        yielded = self.yielded
+        for left, right, positions, fl, fr, gap in pairs:
+            if prove_linear(left) != 0.0 and prove_linear(right) != 0.0:
                 s = min(linear[left], linear[right])
                 xl, bl, ll = motions[left].floors()
                 xr, br, lr = motions[right].floors()
@@ -516,4 +568,55 @@ class OpenGaps:
                 for pos, c, f, h in zip(positions, closed, first, hit):
                     if not c:
                         out[pos] = min(s, float(f) * dS if h else H)
+            if yielded and (left in yielded or right in yielded):
+                short = [i for i, pos in enumerate(positions) if out[pos] < H]
+                if short:
+                    through = self._through_yielding(y, H, ground_bound(), forces, prove_linear, motions,
+                                                     left, right, fl[short], fr[short], gap[short])
+                    for i, s in zip(short, through):
+                        pos = positions[i]
+                        out[pos] = max(out[pos], s)
         return out
+
+    def _through_yielding(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, prove_linear,
+                          motions: dict, left: str, right: str, fl: np.ndarray, fr: np.ndarray,
+                          gap: np.ndarray) -> list[float]:
+        """The levels ``fl``/``fr`` between ``left`` and ``right`` (floors, gaps as a column)
+        proven with each building's floors bounded, on every grid interval, by the tighter of
+        its linear bound (over the intervals where it provably stays linear) and its bound
+        through yielding (:meth:`ModalBound.through_yielding`, any time; a linear building:
+        its linear bound only).  Returns each level's horizon (s)."""
+        dS = H / GRID
+
+        def envelope(b: str, floors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            # (upper, lower) bound of each floor over each grid interval: the free part within its
+            # rate bound of its chord's mean, the forced part at the interval's end
+            up = lo = None
+            parts = []
+            s = prove_linear(b)
+            if s > 0.0:                     # the linear bound's intervals: those ending by s
+                parts.append((motions[b], int(round(s / dS))))
+            bound = self.yielded.get(b)
+            if bound is not None:
+                _, ix, iv = self.buildings[b]
+                parts.append((FloorMotion(bound, y[ix], y[iv], H, ground, forces.get(b)), GRID))
+            for motion, valid in parts:
+                free, forced, rate = motion.floors()
+                x = free[floors]
+                mid = x[:, :-1] + x[:, 1:]
+                mid *= 0.5
+                slack = (0.5 * dS * rate[floors])[:, None] + forced[floors, 1:]
+                hi, low = mid + slack, mid - slack
+                if valid < GRID:
+                    hi[:, valid:] = np.inf
+                    low[:, valid:] = -np.inf
+                up = hi if up is None else np.minimum(up, hi)
+                lo = low if lo is None else np.maximum(lo, low)
+            return up, lo
+
+        up, _ = envelope(left, fl)
+        _, lo = envelope(right, fr)
+        bad = up - lo - gap >= 0.0
+        first = bad.argmax(axis=1).tolist()
+        hit = _ANY(bad, axis=1).tolist()
+        return [float(f) * dS if h else H for f, h in zip(first, hit)]
