@@ -37,9 +37,40 @@ moves as the linear building does.  The proof bounds ``w`` as above and, with th
 bound on the drifts ``D w = D Phi q``, proves that every storey stays elastic over the horizon:
 ``|w_i - alpha s_i| < dy_i`` (since ``d - s = w - alpha s``), with a margin (:data:`ELASTIC_MARGIN`)
 that excludes a storey yielding now (``|d - s| = dy``).  A horizon is then the shorter of the
-gaps' and the storeys': over it the building *is* linear and its floors' bound holds; beyond
-it the master takes base steps.  Bouc-Wen storeys have no elastic range (``z`` changes
-whenever the drift does): no proof, base steps.
+gaps' and the storeys': over it the building *is* linear and its floors' bound holds.
+
+Through yielding (:meth:`ModalBound.through_yielding`).  Whatever a bilinear storey does, its
+shear is ``V = alpha k d + rho`` with ``rho = (1 - alpha) k (d - s)``, the force of its
+elastic-perfectly-plastic element, and ``|rho| <= (1 - alpha) Fy``: building.fmu keeps ``|d -
+s| <= dy`` (an elastic storey leaves that range only through a located yield event, after
+which ``d - s = mode dy`` while it yields; unloading restarts it from the limit), so ``rho``
+is bounded by the element's strength (``tests/test_gap_bound_yielding.py`` checks both on the
+integrator's motion and on an independent return-mapping of the law).  With ``D' K_s D = K``
+the floors obey the *linear* building::
+
+    M u'' + C u' + alpha K u = -M 1 ag + F - D' rho(t),     |rho_i(t)| <= (1 - alpha) Fy_i
+
+``alpha K`` has the modes of ``K`` (``w_j sqrt(alpha)``) and ``C``, Rayleigh or modal on the
+initial stiffness, is still diagonal in them (``c_j = phi_j' C phi_j``, a ratio ``c_j / (2 w_j
+sqrt(alpha))`` that may exceed 1: the free motion has the overdamped branch; ``alpha = 0``
+leaves damped masses, ``q = q0 + q0' (1 - exp(-c s)) / c``).  The free motion from ``u, v`` is
+again exact and the rest is a response to bounded loads: floor ``f`` moves by ``int_0^s
+K_f(s - r) ag(r) dr + sum_i int_0^s H_fi(s - r) rho_i(r) dr`` (and the held force, bounded as
+above), with the impulse responses ``K_f = sum_j Phi_fj Gamma_j h_j`` and ``H_fi = sum_j Phi_fj
+(D phi_j)_i h_j`` (``h_j`` mode j's, of this building), so::
+
+    |forced_f(s)| <= max|ag| over [0, s] int_0^s |K_f| + sum_i (1 - alpha) Fy_i int_0^s |H_fi|
+
+These integrals of each floor's own response are far tighter than the sum over modes of
+``|Phi_fj Gamma_j| G_j`` (the modes' early responses cancel: ``sum_j Phi_fj (D phi_j)_i`` is
+``(M^-1 D')_fi``, zero but for the storeys next to the floor); they are bounded from above on a
+sub-grid (:meth:`ModalBound._kernel_integrals`) and capped by the modal sums.  The bound holds
+whatever the storeys do, so a level's proof takes, on each grid interval and for each floor,
+the tighter of the two bounds that hold there: the linear one while the building is proven
+linear, the one through yielding always (:meth:`OpenGaps._through_yielding`, computed only
+for levels that the linear proof leaves short).  Bouc-Wen storeys (``V = alpha k d + (1 -
+alpha) Fy z``, ``|z|`` bounded) would admit the same bound, but their integrator's ``z`` is
+not proven to stay within its bound: no proof, base steps.
 """
 from __future__ import annotations
 
@@ -455,7 +486,9 @@ class OpenGaps:
 
     :meth:`build` returns None when a building has no such bound (Bouc-Wen storeys,
     non-classical damping): the master then neither takes long steps nor lets contacts sleep.
-    A bilinear building's proof holds while its storeys are proven elastic (:class:`ElasticRange`).
+    A bilinear building's linear proof holds while its storeys are proven elastic
+    (:class:`ElasticRange`); its proof through yielding (``yielded``,
+    :meth:`ModalBound.through_yielding`) at any time.
     """
 
     def __init__(self, buildings: dict, levels: list, elastic: dict | None = None, yielded: dict | None = None):
