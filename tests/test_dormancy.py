@@ -63,8 +63,8 @@ def test_bundled_scene_is_the_same_with_and_without_dormancy(catalog, name):
         assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-3)
         assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-3)
     if asleep.scene.contacts and asleep.stats["proofs"] == 0:
-        # Bouc-Wen storeys (none bundled): no proof that a gap stays open (cosim/master/gap_bound.py),
-        # nothing sleeps
+        # non-classical damping (none bundled): no proof that a gap stays open
+        # (cosim/master/gap_bound.py), nothing sleeps
         assert asleep.stats.get("dormant_steps", 0) == 0
         assert asleep.cost.communication_steps == awake.cost.communication_steps
         return

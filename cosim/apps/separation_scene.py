@@ -263,9 +263,21 @@ def _simulated_estimate(runner: _Runner, uncoupled, scene: Scene, level, left, r
     xl = uncoupled[column(level.left, element_name("x", level.floor_left))]
     xr = uncoupled[column(level.right, element_name("x", level.floor_right))]
     sampled = required_separation(uncoupled.time, xl, xr)
-    exact = bisect_separation(lambda gap: contacts_at(runner.run({
-        **{lv.instance: UNCOUPLED_GAP for lv in scene.levels}, level.instance: gap}), level.instance) > 0,
-        sampled)
+    onsets = {}                 # gap -> when the latest contact began, in the runs that touched
+
+    def touches(gap: float) -> bool:
+        result = runner.run({**{lv.instance: UNCOUPLED_GAP for lv in scene.levels}, level.instance: gap})
+        touched = contacts_at(result, level.instance) > 0
+        if touched and result.known(column(level.instance, "t_onset")):
+            onsets[gap] = result.value_at_end(column(level.instance, "t_onset"))
+        return touched
+
+    exact = bisect_separation(touches, sampled)
+    if onsets:
+        # when: the touch in the run with the largest gap that still touched, just below the
+        # separation (the peak closing to within the bracket), not the uncoupled run's sample,
+        # a step end (long steps: up to 0.32 s from the peak)
+        exact = Separation(exact.gap, onsets[max(onsets)])
     peaks = (_peak(uncoupled, level.left, level.floor_left), _peak(uncoupled, level.right, level.floor_right))
     spectrum = (spectral_peak_displacement(left, level.floor_left, record.acceleration, record.dt),
                 spectral_peak_displacement(right, level.floor_right, record.acceleration, record.dt))
