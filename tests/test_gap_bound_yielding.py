@@ -306,16 +306,20 @@ def test_open_gaps_through_yielding_is_a_proof(alpha):
     assert longer >= 5
 
 
-@pytest.mark.parametrize("overrides", [("left.alpha=0", "right.alpha=0"),
-                                       ("left.alpha=0.5", "right.alpha=0.5", "pounding.gap=0.02")])
-def test_master_through_yielding_keeps_the_impacts(catalog, overrides):
-    """default_inelastic with no hardening (alpha = 0: the proof's damped free masses) and with
-    strong hardening and a narrower gap: the default run (long steps and sleeping contacts
-    through yielding) against base steps with every contact awake.  A yielding building
-    integrates the record's knots exactly either way, so the impacts are the same and the
-    forces agree to round-off (measured 2e-14 to 5e-14); no closure inside an unsaved step,
-    no rollback, and most steps long.  Measured: 398 and 603 steps, 69 and 223 contact
-    doSteps (4 and 11 impacts), against 4000 and 4007."""
+@pytest.mark.parametrize("overrides, rel, steps", [
+    (("left.alpha=0", "right.alpha=0"), 1e-9, 0.2),
+    (("left.alpha=0.5", "right.alpha=0.5", "pounding.gap=0.02"), 1e-9, 0.2),
+    (("left.hysteresis=bouc_wen", "right.hysteresis=bouc_wen"), 1e-6, 0.3)])
+def test_master_through_yielding_keeps_the_impacts(catalog, overrides, rel, steps):
+    """default_inelastic with no hardening (alpha = 0: the proof's damped free masses), with
+    strong hardening and a narrower gap, and with Bouc-Wen storeys (before, base steps and every
+    contact awake: no elastic range): the default run (long steps and sleeping contacts
+    through yielding) against base steps with every contact awake.  The same impacts; peak
+    force and energy to ``rel``: a bilinear building integrates the record's knots exactly
+    either way (measured 2e-14 to 5e-14), a Bouc-Wen one to its Runge-Kutta tolerance over
+    other step pieces (measured 2e-7); no closure inside an unsaved step, no rollback, and
+    most steps long.  Measured: 398, 603 and 746 steps, 69, 223 and 76 contact doSteps (4, 11
+    and 3 impacts), against 4000 to 4007."""
     from cosim.master.results import summarize
     from scenario_checks import simulate_scene
 
@@ -325,11 +329,10 @@ def test_master_through_yielding_keeps_the_impacts(catalog, overrides):
     a, b = summarize(base), summarize(long)
     assert b.impacts == a.impacts > 0
     for c in a.contacts:
-        # 1e-9: round-off of the same exact motions stepped in other pieces (measured < 1e-13)
-        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-9)
-        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-9)
+        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=rel)
+        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=rel)
     assert long.stats["missed_events"] == 0 and long.cost.rollbacks == 0
-    assert long.cost.communication_steps < 0.2 * base.cost.communication_steps
+    assert long.cost.communication_steps < steps * base.cost.communication_steps
     assert long.cost.do_steps["pounding_3"] < 0.1 * base.cost.do_steps["pounding_3"]
 
 
@@ -395,26 +398,3 @@ def test_bound_holds_through_bouc_wen_storeys():
                                          true) > 1e-6))
     assert reached > 100
     assert broken >= 4
-
-
-def test_master_through_bouc_wen_storeys(catalog):
-    """default_inelastic with Bouc-Wen storeys: with the proof through yielding, long steps and
-    sleeping contacts (before, base steps and every contact awake: no elastic range), the same
-    impacts as base steps with every contact awake, peak force and energy within 1e-6 (the
-    Runge-Kutta integrator's tolerance over other step pieces; measured 2e-7 and 6e-8), no
-    missed event, no rollback.  Measured: 746 steps, 76 contact doSteps, against 4000."""
-    from cosim.master.results import summarize
-    from scenario_checks import simulate_scene
-
-    overrides = ("left.hysteresis=bouc_wen", "right.hysteresis=bouc_wen")
-    long = simulate_scene(catalog, "default_inelastic", overrides, record="summary", output_interval=None)
-    base = simulate_scene(catalog, "default_inelastic", overrides, record="summary", output_interval=None,
-                          long_steps=False, dormancy=False)
-    a, b = summarize(base), summarize(long)
-    assert b.impacts == a.impacts > 0
-    for c in a.contacts:
-        assert b.contacts[c].peak_force_N == pytest.approx(a.contacts[c].peak_force_N, rel=1e-6)
-        assert b.contacts[c].dissipated_energy_J == pytest.approx(a.contacts[c].dissipated_energy_J, rel=1e-6)
-    assert long.stats["missed_events"] == 0 and long.cost.rollbacks == 0
-    assert long.cost.communication_steps < 0.3 * base.cost.communication_steps
-    assert long.cost.do_steps["pounding_3"] < 0.1 * base.cost.do_steps["pounding_3"]
