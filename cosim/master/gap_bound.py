@@ -211,7 +211,10 @@ class ModalBound:
         """:meth:`tables` and, per ``H``, what the forced bound of a unit ground acceleration is
         on every floor, ``sum_j |Phi_fj Gamma_j| G_j(s_k)`` (floors x points), and on every
         floor then every storey drift (:attr:`rows`): a proof scales them by its ground bound
-        (a run's proofs use a few horizons only: computed once per horizon, not per proof)."""
+        (a run's proofs use a few horizons only: computed once per horizon, not per proof).  A
+        bound through yielding (:attr:`plastic` set) has its floors' ground bound from their
+        impulse responses where tighter, and last the storey forces' bound on every floor
+        (floors x points; None otherwise)."""
         cached = self._tables.get(H)
         if cached is not None:
             return cached
