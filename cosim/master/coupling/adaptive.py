@@ -506,8 +506,7 @@ class Adaptive(CouplingStrategy):
                 dormancy.wake(node)
                 node.step(y, t, h)
                 pending.remove(k)
-        for k in pending:
-            dormancy.skip(system.contacts[k], t, h)
+        dormancy.skip([system.contacts[k] for k in pending], t, h)
 
     def _forces(self, sleeping: list[int]) -> dict:
         """Floor forces (N) of the contacts that stepped, per building, held over the step."""
