@@ -244,6 +244,18 @@ class Adaptive(CouplingStrategy):
         self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
         self._kinematics: list = []                        # each level's (delta, rate, its rate) at the step start
         self._now_active: list = []                        # each level's _active at the step start
+        self._outputs: tuple = ([], [], [])                # each contact's F, delta, v_impact at the step start
+        # what the step choice reads of every level, in one gather of System.y (rows: x1, x2, v1,
+        # v2, a1, a2 of the floors, then the contact's F, delta, v_impact; a column per level):
+        # a handful of numpy calls per step instead of a dozen item() calls per level
+        lv = self.levels
+        self._reads = np.array([[getattr(v, f) for v in lv] for f in ("ix1", "ix2", "iv1", "iv2", "ia1", "ia2",
+                                                                    "i_F", "i_delta", "i_vimp")],
+                               dtype=np.intp).reshape(9, len(lv))
+        self._gaps_m = np.array([v.gap for v in lv], dtype=float)
+        # a closure predicted later than this (s) changes neither the step (at most h_max) nor the
+        # saving of states (a closure within risk_factor steps): _plan skips its time scales
+        self._far = 2.0 * max(1.0, self.risk_factor) * self.h_max
 
     def _knot_capacity(self) -> int:
         """Knots the ground FMU gives and every building takes (0: no knots)."""
@@ -299,31 +311,40 @@ class Adaptive(CouplingStrategy):
             level += 1
         return level
 
-    def _active(self, lv, kinematics) -> bool:
-        """A contact that has something to do now: a force, a closed gap (its own, or the host's:
-        ``kinematics``, the level's ``(delta, rate, its rate)`` now)."""
-        y = self.system.y
-        return y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or kinematics[0] >= 0.0
+    def _levels_now(self) -> tuple[list, list, tuple]:
+        """Each level's kinematics ``(delta, rate, its rate)`` (:meth:`_Level.kinematics`, the
+        same arithmetic), whether its contact has something to do now (a force, a closed gap:
+        its own, or the host's) and the contacts' ``(F, delta, v_impact)``, from one gather."""
+        g = self.system.y[self._reads]
+        diff = g[0:6:2] - g[1:6:2]
+        diff[0] -= self._gaps_m
+        d, dd, ddd = diff.tolist()
+        F, delta, vimp = g[6:].tolist()
+        active = [f != 0.0 or dc >= 0.0 or dh >= 0.0 for f, dc, dh in zip(F, delta, d)]
+        return list(zip(d, dd, ddd)), active, (F, delta, vimp)
 
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, closures)``: the longest safe step (s) and, for each gap that may close,
         ``(s*, h_keep)``: the earliest closure (s) and the longest step (s) accepted whatever
         closes in it (no state to save for it), from each level's kinematics now
-        (``_kinematics``, read by :meth:`step`)."""
+        (``_kinematics``, read by :meth:`step`).  A closure later than ``_far`` is left out: it
+        could change neither."""
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
         closures = []
         proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
-        for lv, until, (d, dd, ddd) in zip(self.levels, self._proven, self._kinematics):
+        far = self._far
+        F, delta, vimp = self._outputs
+        for k, (lv, until, (d, dd, ddd)) in enumerate(zip(self.levels, self._proven, self._kinematics)):
             if until >= proven:
                 continue
-            if d > 0.0 or y.item(lv.i_F) > 0.0 or y.item(lv.i_delta) > 0.0:     # in contact
-                h_target = min(h_target, lv.in_contact_scale(d, dd, y.item(lv.i_vimp), self.contact_fraction))
+            if d > 0.0 or F[k] > 0.0 or delta[k] > 0.0:     # in contact
+                h_target = min(h_target, lv.in_contact_scale(d, dd, vimp[k], self.contact_fraction))
                 continue
             A = self.accel_safety * abs(ddd) + a_extra
             s = closure_time(d, dd, A)
-            if s < math.inf:
+            if s <= far:
                 v_closing = max(dd, 0.0) + A * s                    # fastest possible approach at closure
                 h_contact = lv.in_contact_scale(0.0, v_closing, v_closing, self.contact_fraction)
                 h_target = min(h_target, max(s, h_contact))
@@ -390,12 +411,11 @@ class Adaptive(CouplingStrategy):
         cap = math.inf
         finest = 0                                               # a retry must be finer than the rejected step
         saved = None
-        y = system.y
         while True:
             # each level's kinematics and whether it has something to do, once per try (the
             # floors do not move before the buildings step, a contact's outputs not before it does)
-            self._kinematics = start = [lv.kinematics(y) for lv in self.levels]
-            self._now_active = [self._active(lv, k) for lv, k in zip(self.levels, start)]
+            self._kinematics, self._now_active, self._outputs = self._levels_now()
+            start = self._kinematics
             h_target, closures = self._plan()
             level = max(self._dyadic_level(min(h_target, cap)), finest)
             level = max(level, max(self._level, 0) - 1)          # grow by at most a factor 2 (below h_base)
@@ -534,13 +554,13 @@ class Adaptive(CouplingStrategy):
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
         longer than that contact's contact step, else None."""
-        y = self.system.y
+        g = self.system.y[self._reads[:4]]
+        diff = g[0:4:2] - g[1:4:2]
+        diff[0] -= self._gaps_m
+        ends, rates = diff.tolist()
         retry = None
-        for lv, (d0, dd0, _) in zip(self.levels, start):
-            if d0 > 0.0:
-                continue
-            d1, dd1, _ = lv.kinematics(y)
-            if d1 <= 0.0:
+        for lv, (d0, dd0, _), d1, dd1 in zip(self.levels, start, ends, rates):
+            if d0 > 0.0 or d1 <= 0.0:
                 continue
             v = max(dd0, dd1)
             h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
