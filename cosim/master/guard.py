@@ -53,9 +53,6 @@ MAX_SUBSTEPS_PER_IMPACT = 5_000
 #: :data:`MAX_SUBSTEPS_PER_IMPACT` (four times the most seen in one doStep on the bundled scenes).
 SUBSTEPS_PER_STEP = 64
 
-#: ``ndarray.any`` without its Python wrapper (the guard's checks run after every step)
-_ANY = np.logical_or.reduce
-
 
 class InstabilityError(RuntimeError):
     """A run produced numbers that cannot be trusted; the message says what to change.
@@ -231,18 +228,9 @@ class StabilityGuard:
         # energy stored at t0 in contacts that start closed (allow_initial_overlap): it is in
         # the system, and a contact that releases it reports it as negative dissipation
         self._stored0 = [lv.law.elastic_energy(lv.kinematics(system.y)[0]) for lv in self.levels]
-        self._stored0_array = np.array(self._stored0, dtype=float)
         self.E_initial = sum(system.y.item(i) for i in self._i_mech) + sum(self._stored0)
         self.E_avail = self.E_initial
         self._limits = [0.0] * len(self.levels)
-        # the per-level checks of every step as a few array operations on the levels' outputs
-        # (the loop over levels runs only where one of them may fail, to say which and why)
-        lv = self.levels
-        self._i_delta = np.array([v.i_delta for v in lv], dtype=np.intp)
-        self._i_Ediss = np.array([v.i_Ediss for v in lv], dtype=np.intp)
-        self._i_F = np.array([v.i_F for v in lv], dtype=np.intp)
-        self._plain = np.array([not v.resolved for v in lv], dtype=bool)
-        self._any_plain = bool(self._plain.any())
         self._update_limits()
         #: largest communication step / impact time scale seen in contact, per plain-law contact
         self.step_over_time_scale = {lv.name: 0.0 for lv in self.levels if not lv.resolved}
@@ -253,18 +241,6 @@ class StabilityGuard:
         self._steps_since = [0] * len(self.levels)
         self._onset = [0.0] * len(self.levels)
         self._touching = [False] * len(self.levels)   # in contact after the previous step
-        # the same counters as arrays, for the levels that report impacts and substeps (every
-        # contact of the package's pounding.fmu): _work's array path; None: the loop
-        counted = all(v.j_impacts >= 0 and v.j_substeps >= 0 for v in lv)
-        self._counted = counted and bool(lv)
-        if self._counted:
-            self._j_impacts = np.array([v.j_impacts for v in lv], dtype=np.intp)
-            self._j_substeps = np.array([v.j_substeps for v in lv], dtype=np.intp)
-            self._impacts = np.zeros(len(lv), dtype=np.int64)
-            self._substeps = np.zeros(len(lv), dtype=np.int64)
-            self._steps_since = np.zeros(len(lv), dtype=np.int64)
-            self._onset = np.zeros(len(lv))
-            self._touching = np.zeros(len(lv), dtype=bool)
 
     def watched_columns(self) -> list[str]:
         """The Real outputs the guard reads after every step."""
@@ -280,7 +256,6 @@ class StabilityGuard:
         E = self.E_avail
         self._limits = [self.penetration_factor * ((lv.law.n + 1.0) * E / lv.law.k) ** (1.0 / (lv.law.n + 1.0))
                         + 1e-12 for lv in self.levels]
-        self._limits_array = np.array(self._limits, dtype=float)
 
     def penetration_limit(self) -> list[float]:
         """Deepest credible penetration of each contact now (m)."""
@@ -303,17 +278,23 @@ class StabilityGuard:
             self.E_avail = E_in
             self._update_limits()
         tol = self.energy_tol * self.E_avail + 1e-9
-        if self.levels:
-            # the loop below only where a level may fail (the same comparisons, on arrays) or a
-            # plain-law contact is closed (_sampling keeps its largest step / time scale)
-            delta = y[self._i_delta]
-            doubt = bool(_ANY(delta > self._limits_array)) or bool(_ANY(y[self._i_Ediss] < -tol - self._stored0_array))
-            if not doubt and self._any_plain:
-                doubt = bool(_ANY(delta[self._plain] > 0.0))
-            if doubt:
-                error = self._level_problem(t, h, tol)
+        for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
+            delta = item(lv.i_delta)
+            if delta > limit:
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: penetration {delta:.3g} m is beyond physical sense "
+                    f"(all {self.E_avail:.3g} J in the system would compress the contact only "
+                    f"{limit / self.penetration_factor:.3g} m): {self._advice(lv, h)}", t, lv.name, "penetration")
+            if delta > 0.0 and not lv.resolved:
+                error = self._sampling(lv, t, h)
                 if error is not None:
                     return error
+            if item(lv.i_Ediss) < -tol - stored0:
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: the contact created {-item(lv.i_Ediss) - stored0:.3g} J "
+                    f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
+                    t, lv.name, "energy")
+        if self.levels:
             work = -sum(self._stored0)
             for i in self._i_external:
                 work += item(i)
@@ -333,28 +314,6 @@ class StabilityGuard:
                 f"in: {self._advice(lv, h)}", t, lv.name if lv else "", "energy")
         return self._work(t, h)
 
-    def _level_problem(self, t: float, h: float, tol: float) -> InstabilityError | None:
-        """The first contact level whose penetration or dissipated energy is beyond sense, or
-        whose plain force law is stepped too coarsely (:meth:`_sampling`), or None."""
-        item = self.system.y.item
-        for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
-            delta = item(lv.i_delta)
-            if delta > limit:
-                return InstabilityError(
-                    f"{lv.name}: t = {t:.6g} s: penetration {delta:.3g} m is beyond physical sense "
-                    f"(all {self.E_avail:.3g} J in the system would compress the contact only "
-                    f"{limit / self.penetration_factor:.3g} m): {self._advice(lv, h)}", t, lv.name, "penetration")
-            if delta > 0.0 and not lv.resolved:
-                error = self._sampling(lv, t, h)
-                if error is not None:
-                    return error
-            if item(lv.i_Ediss) < -tol - stored0:
-                return InstabilityError(
-                    f"{lv.name}: t = {t:.6g} s: the contact created {-item(lv.i_Ediss) - stored0:.3g} J "
-                    f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
-                    t, lv.name, "energy")
-        return None
-
     # -- work ------------------------------------------------------------------------------------
     def _work(self, t: float, h: float) -> InstabilityError | None:
         """Work that explodes (see the class docstring), or None."""
@@ -364,55 +323,6 @@ class StabilityGuard:
                 f"{self.max_steps:,} (--max-steps; the scene plans {self.system.scene.stop_time / self.base_step:.3g} "
                 f"at step {self.base_step:g} s, the rest are refinements near impacts): raise --max-steps on "
                 f"purpose, or lengthen the step", t, "", "work")
-        if self._counted:
-            total_impacts, error = self._counters(t)
-        else:
-            total_impacts, error = self._counters_per_level(t)
-        if error is not None:
-            return error
-        refined = self.steps - t / self.base_step
-        if self.levels:
-            per_impact = MAX_REFINED_STEPS_PER_IMPACT[all(lv.resolved for lv in self.levels)]
-            if refined > per_impact * (total_impacts + 1):
-                lv = max(self.levels, key=lambda lv: self.system.y.item(lv.i_delta))
-                return InstabilityError(
-                    f"{lv.name}: t = {t:.6g} s: the coupling has taken {refined:,.0f} refined communication steps "
-                    f"for {total_impacts} impact(s) (limit {per_impact:,} per impact), the last {h:.2g} s long: "
-                    f"{self._collapse(lv)}", t, lv.name, "work")
-        return None
-
-    def _counters(self, t: float) -> tuple[int, InstabilityError | None]:
-        """:meth:`_counters_per_level` on arrays (every level reports impacts and substeps): the
-        same counts, and the first level beyond its limit."""
-        ints = self.system.ints
-        y = self.system.y
-        impacts = ints[self._j_impacts]
-        new = impacts != self._impacts
-        if _ANY(new):                             # a new impact began in this step
-            self._impacts[new] = impacts[new]
-            self._substeps[new] = 0
-            self._steps_since[new] = 0
-            self._onset[new] = t
-        # a contact's ``substeps`` is current only after a step that began or ended in contact
-        # (see _counters_per_level)
-        touching = y[self._i_F] != 0.0
-        touching |= y[self._i_delta] >= 0.0
-        counted = touching | self._touching
-        if _ANY(counted):
-            self._substeps[counted] += ints[self._j_substeps][counted]
-        self._touching = touching
-        self._steps_since += 1
-        beyond = self._substeps > MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * self._steps_since
-        total = int(impacts.sum(dtype=np.int64))
-        if not _ANY(beyond):
-            return total, None
-        i = int(beyond.argmax())
-        return total, self._too_many_substeps(self.levels[i], t, int(self._substeps[i]), int(self._steps_since[i]),
-                                              float(self._onset[i]))
-
-    def _counters_per_level(self, t: float) -> tuple[int, InstabilityError | None]:
-        """The contacts' impacts so far, and the first whose internal steps since its latest
-        onset are beyond :data:`MAX_SUBSTEPS_PER_IMPACT` plus :data:`SUBSTEPS_PER_STEP` per step."""
         ints = self.system.ints
         item = self.system.y.item
         total_impacts = 0
@@ -439,16 +349,21 @@ class StabilityGuard:
             self._steps_since[i] += 1
             allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * self._steps_since[i]
             if self._substeps[i] > allowed:
-                return total_impacts, self._too_many_substeps(lv, t, self._substeps[i], self._steps_since[i],
-                                                              self._onset[i])
-        return total_impacts, None
-
-    def _too_many_substeps(self, lv: _Level, t: float, substeps: int, steps: int, onset: float) -> InstabilityError:
-        return InstabilityError(
-            f"{lv.name}: t = {t:.6g} s: the contact FMU has taken {substeps:,} internal steps in "
-            f"{steps} communication steps since its impact at t = {onset:.6g} s "
-            f"(limit {MAX_SUBSTEPS_PER_IMPACT:,} + {SUBSTEPS_PER_STEP} per step; a resolved impact takes "
-            f"40-90): {self._stuck(lv)}", t, lv.name, "work")
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: the contact FMU has taken {self._substeps[i]:,} internal steps in "
+                    f"{self._steps_since[i]} communication steps since its impact at t = {self._onset[i]:.6g} s "
+                    f"(limit {MAX_SUBSTEPS_PER_IMPACT:,} + {SUBSTEPS_PER_STEP} per step; a resolved impact takes "
+                    f"40-90): {self._stuck(lv)}", t, lv.name, "work")
+        refined = self.steps - t / self.base_step
+        if self.levels:
+            per_impact = MAX_REFINED_STEPS_PER_IMPACT[all(lv.resolved for lv in self.levels)]
+            if refined > per_impact * (total_impacts + 1):
+                lv = max(self.levels, key=lambda lv: self.system.y.item(lv.i_delta))
+                return InstabilityError(
+                    f"{lv.name}: t = {t:.6g} s: the coupling has taken {refined:,.0f} refined communication steps "
+                    f"for {total_impacts} impact(s) (limit {per_impact:,} per impact), the last {h:.2g} s long: "
+                    f"{self._collapse(lv)}", t, lv.name, "work")
+        return None
 
     def _law_text(self, level: _Level) -> str:
         y = self.system.y
