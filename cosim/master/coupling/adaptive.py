@@ -243,16 +243,12 @@ class Adaptive(CouplingStrategy):
             self.long_levels = max(0, int(math.floor(math.log2(longest / self.h_max) + 1e-9)))
         self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
         self._kinematics: list = []                        # each level's (delta, rate, its rate) at the step start
-        self._now_active: list = []                        # each level's _active at the step start
-        self._outputs: tuple = ([], [], [])                # each contact's F, delta, v_impact at the step start
-        # what the step choice reads of every level, in one gather of System.y (rows: x1, x2, v1,
-        # v2, a1, a2 of the floors, then the contact's F, delta, v_impact; a column per level):
-        # a handful of numpy calls per step instead of a dozen item() calls per level
-        lv = self.levels
-        self._reads = np.array([[getattr(v, f) for v in lv] for f in ("ix1", "ix2", "iv1", "iv2", "ia1", "ia2",
-                                                                    "i_F", "i_delta", "i_vimp")],
-                               dtype=np.intp).reshape(9, len(lv))
-        self._gaps_m = np.array([v.gap for v in lv], dtype=float)
+        self._now_active: list = []                        # each contact has something to do at the step start (_levels_now)
+        # where the step choice reads each level in System.y, and its gap (m): x1, x2, v1, v2, a1,
+        # a2 of the floors, the contact's F and delta (plain ints: item() on a few scalars per
+        # level is cheaper than numpy calls on arrays of a few levels, measured for 1 and 8)
+        self._level_reads = [(lv.ix1, lv.ix2, lv.iv1, lv.iv2, lv.ia1, lv.ia2, lv.i_F, lv.i_delta, lv.gap)
+                             for lv in self.levels]
         # a closure predicted later than this (s) changes neither the step (at most h_max) nor the
         # saving of states (a closure within risk_factor steps): _plan skips its time scales
         self._far = 2.0 * max(1.0, self.risk_factor) * self.h_max
@@ -311,17 +307,17 @@ class Adaptive(CouplingStrategy):
             level += 1
         return level
 
-    def _levels_now(self) -> tuple[list, list, tuple]:
-        """Each level's kinematics ``(delta, rate, its rate)`` (:meth:`_Level.kinematics`, the
-        same arithmetic), whether its contact has something to do now (a force, a closed gap:
-        its own, or the host's) and the contacts' ``(F, delta, v_impact)``, from one gather."""
-        g = self.system.y[self._reads]
-        diff = g[0:6:2] - g[1:6:2]
-        diff[0] -= self._gaps_m
-        d, dd, ddd = diff.tolist()
-        F, delta, vimp = g[6:].tolist()
-        active = [f != 0.0 or dc >= 0.0 or dh >= 0.0 for f, dc, dh in zip(F, delta, d)]
-        return list(zip(d, dd, ddd)), active, (F, delta, vimp)
+    def _levels_now(self) -> tuple[list, list]:
+        """Each level's kinematics ``(delta, rate, its rate)`` now (:meth:`_Level.kinematics`,
+        the same arithmetic) and whether its contact has something to do: a force, a closed
+        gap (its own, or the host's)."""
+        item = self.system.y.item
+        kinematics, active = [], []
+        for x1, x2, v1, v2, a1, a2, i_F, i_delta, gap in self._level_reads:
+            d = item(x1) - item(x2) - gap
+            kinematics.append((d, item(v1) - item(v2), item(a1) - item(a2)))
+            active.append(item(i_F) != 0.0 or item(i_delta) >= 0.0 or d >= 0.0)
+        return kinematics, active
 
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, closures)``: the longest safe step (s) and, for each gap that may close,
@@ -335,12 +331,11 @@ class Adaptive(CouplingStrategy):
         closures = []
         proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
         far = self._far
-        F, delta, vimp = self._outputs
-        for k, (lv, until, (d, dd, ddd)) in enumerate(zip(self.levels, self._proven, self._kinematics)):
+        for lv, until, (d, dd, ddd) in zip(self.levels, self._proven, self._kinematics):
             if until >= proven:
                 continue
-            if d > 0.0 or F[k] > 0.0 or delta[k] > 0.0:     # in contact
-                h_target = min(h_target, lv.in_contact_scale(d, dd, vimp[k], self.contact_fraction))
+            if d > 0.0 or y.item(lv.i_F) > 0.0 or y.item(lv.i_delta) > 0.0:     # in contact
+                h_target = min(h_target, lv.in_contact_scale(d, dd, y.item(lv.i_vimp), self.contact_fraction))
                 continue
             A = self.accel_safety * abs(ddd) + a_extra
             s = closure_time(d, dd, A)
@@ -414,7 +409,7 @@ class Adaptive(CouplingStrategy):
         while True:
             # each level's kinematics and whether it has something to do, once per try (the
             # floors do not move before the buildings step, a contact's outputs not before it does)
-            self._kinematics, self._now_active, self._outputs = self._levels_now()
+            self._kinematics, self._now_active = self._levels_now()
             start = self._kinematics
             h_target, closures = self._plan()
             level = max(self._dyadic_level(min(h_target, cap)), finest)
@@ -554,15 +549,15 @@ class Adaptive(CouplingStrategy):
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
         longer than that contact's contact step, else None."""
-        g = self.system.y[self._reads[:4]]
-        diff = g[0:4:2] - g[1:4:2]
-        diff[0] -= self._gaps_m
-        ends, rates = diff.tolist()
+        item = self.system.y.item
         retry = None
-        for lv, (d0, dd0, _), d1, dd1 in zip(self.levels, start, ends, rates):
-            if d0 > 0.0 or d1 <= 0.0:
+        for lv, (d0, dd0, _), (x1, x2, v1, v2, *_, gap) in zip(self.levels, start, self._level_reads):
+            if d0 > 0.0:
                 continue
-            v = max(dd0, dd1)
+            d1 = item(x1) - item(x2) - gap
+            if d1 <= 0.0:
+                continue
+            v = max(dd0, item(v1) - item(v2))
             h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
             if h <= h_contact * (1.0 + 1e-9) or h <= self.h_min * (1.0 + 1e-9):
                 continue
