@@ -53,6 +53,9 @@ MAX_SUBSTEPS_PER_IMPACT = 5_000
 #: :data:`MAX_SUBSTEPS_PER_IMPACT` (four times the most seen in one doStep on the bundled scenes).
 SUBSTEPS_PER_STEP = 64
 
+#: ``ndarray.sum`` without its Python wrapper (checked after every step)
+_SUM = np.add.reduce
+
 
 class InstabilityError(RuntimeError):
     """A run produced numbers that cannot be trusted; the message says what to change.
@@ -265,7 +268,7 @@ class StabilityGuard:
         """The first problem found after the step that ended at ``t`` (step ``h``), or None."""
         self.steps += 1
         y = self.system.y
-        if not math.isfinite(y.sum()):      # one reduction; a non-finite entry makes the sum non-finite
+        if not math.isfinite(_SUM(y)):      # one reduction; a non-finite entry makes the sum non-finite
             bad = self.system.columns[int(np.flatnonzero(~np.isfinite(y))[0])] if not np.isfinite(y).all() \
                 else "(sum of outputs)"
             return InstabilityError(f"t = {t:.6g} s: output {bad} is not finite: {self._advice(None, h)}",
@@ -329,7 +332,7 @@ class StabilityGuard:
         for i, lv in enumerate(self.levels):
             if lv.j_impacts < 0:
                 continue
-            impacts = int(ints[lv.j_impacts])
+            impacts = ints.item(lv.j_impacts)
             total_impacts += impacts
             if impacts != self._impacts[i]:       # a new impact began in this step
                 self._impacts[i] = impacts
@@ -344,7 +347,7 @@ class StabilityGuard:
             # only steps in contact), so such a step adds nothing.
             touching = item(lv.i_F) != 0.0 or item(lv.i_delta) >= 0.0
             if touching or self._touching[i]:
-                self._substeps[i] += int(ints[lv.j_substeps])
+                self._substeps[i] += ints.item(lv.j_substeps)
             self._touching[i] = touching
             self._steps_since[i] += 1
             allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * self._steps_since[i]
