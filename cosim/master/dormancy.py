@@ -281,8 +281,10 @@ class Dormancy:
                 self._steps.clear()
                 self._sources.clear()
             return
+        if len(self._steps) < JOURNAL_TRIM:         # now and then, not at every step
+            return
         first = min(s.start for s in self.sleeping.values()) - self._base
-        if first >= JOURNAL_TRIM:                   # now and then, not at every step
+        if first >= JOURNAL_TRIM:
             del self._steps[:first]
             del self._sources[:first]
             self._base += first
