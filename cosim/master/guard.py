@@ -231,6 +231,8 @@ class StabilityGuard:
         # energy stored at t0 in contacts that start closed (allow_initial_overlap): it is in
         # the system, and a contact that releases it reports it as negative dissipation
         self._stored0 = [lv.law.elastic_energy(lv.kinematics(system.y)[0]) for lv in self.levels]
+        self._work0 = -sum(self._stored0)        # the net work's start (J), summed once, not per step
+        self._resolved = all(lv.resolved for lv in self.levels)
         self.E_initial = sum(system.y.item(i) for i in self._i_mech) + sum(self._stored0)
         self.E_avail = self.E_initial
         self._limits = [0.0] * len(self.levels)
@@ -298,7 +300,7 @@ class StabilityGuard:
                     f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
                     t, lv.name, "energy")
         if self.levels:
-            work = -sum(self._stored0)
+            work = self._work0
             for i in self._i_external:
                 work += item(i)
             if work > tol:
@@ -359,7 +361,7 @@ class StabilityGuard:
                     f"40-90): {self._stuck(lv)}", t, lv.name, "work")
         refined = self.steps - t / self.base_step
         if self.levels:
-            per_impact = MAX_REFINED_STEPS_PER_IMPACT[all(lv.resolved for lv in self.levels)]
+            per_impact = MAX_REFINED_STEPS_PER_IMPACT[self._resolved]
             if refined > per_impact * (total_impacts + 1):
                 lv = max(self.levels, key=lambda lv: self.system.y.item(lv.i_delta))
                 return InstabilityError(
