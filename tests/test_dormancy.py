@@ -233,6 +233,56 @@ def test_a_catch_up_that_finds_an_impact_is_redone_step_by_step(fakes):
     np.testing.assert_allclose(starts[1:], ends[:-1], rtol=0, atol=1e-15)
 
 
+def test_sleeping_contacts_share_one_journal_row_per_step(fakes):
+    """Dormancy keeps one journal row per skipped step whatever the number of sleeping contacts
+    (the floors' states its contacts' inputs come from), gives each waking contact the inputs
+    it would have been given at its skipped steps, and forgets the rows no sleeper needs: a
+    run's memory grows with the longest sleep, not with the run."""
+    from cosim.master.dormancy import JOURNAL_TRIM, Dormancy
+
+    raw = dict(name="fake2", stop_time=10.0, step=H, coupling="adaptive",
+               buildings=dict(left=dict(m=[2.0, 2.0], k=[0.0, 0.0], zeta=0.0),
+                              right=dict(m=[3.0, 3.0], k=[0.0, 0.0], zeta=0.0)),
+               pounding=dict(floors=[1, 2], gap=GAP, k=1e4, n=1.0, model="hertz", resolve_impacts=False))
+    with System(load_scene(raw, catalog=fakes), fakes) as system:
+        system.initialize(0.0)
+        first, second = system.contacts
+        dormancy = Dormancy(system, {}, span=1.0)
+        y = system.y
+        floors = [system.columns.index(f"{b}.{v}[{i}]") for b in ("left", "right") for v in "xv" for i in (1, 2)]
+
+        def skip(k, nodes):                 # the floors move; ``nodes`` skip step k
+            y[floors] = [1e-3 * k + j for j in range(len(floors))]
+            dormancy.skip(nodes, k * H, H)
+            dormancy.commit()
+
+        def catch_up(node):                 # the doSteps of its catch-up: (t, x1)
+            table = node.instance.steps().table
+            return table[:, 0].tolist(), table[:, 2 + node.instance.steps().inputs.index("x1")].tolist()
+
+        for k in range(300):
+            skip(k, [first, second])
+        assert len(dormancy._steps) == 300 and dormancy.stats["dormant_steps"] == 600
+        dormancy.wake(second)               # x1 = left.x[2]: 1e-3 k + 1 at row k
+        dormancy.commit()
+        # one declared step from row 0 (its inputs then), then its last two skipped steps as given
+        assert catch_up(second) == ([0.0, 298 * H, 299 * H], [1.0, 1e-3 * 298 + 1, 1e-3 * 299 + 1])
+        for k in range(300, 400):           # the second sleeps again from row 300
+            skip(k, [first, second])
+        dormancy.wake(first)                # x1 = left.x[1]: 1e-3 k at row k
+        dormancy.commit()
+        assert catch_up(first) == ([0.0, 398 * H, 399 * H], [0.0, 1e-3 * 398, 1e-3 * 399])
+        # the rows before the second's sleep are forgotten (more than JOURNAL_TRIM of them)
+        assert 300 >= JOURNAL_TRIM and dormancy._base == 300 and len(dormancy._steps) == 100
+        for k in range(400, 450):
+            skip(k, [second])
+        assert len(dormancy._steps) == 150 and dormancy.stats["dormant_steps"] == 850
+        dormancy.wake_all()
+        dormancy.commit()
+        assert not dormancy._steps and not dormancy.sleeping
+        assert catch_up(second)[0][-3:] == [300 * H, 448 * H, 449 * H]
+
+
 # -- the real scene in which the first impact comes out of a sleep ------------------------------------------
 def test_free_vibration_wakes_for_its_first_impact(catalog):
     """free_vibration: the floors are released 9 cm apart across a 2 cm gap and meet at 0.19 s;

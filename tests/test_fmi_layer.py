@@ -32,6 +32,23 @@ def test_variable_lookup_by_name_and_type(building):
         building.variable("x[1]", "parameter")
 
 
+def test_an_unknown_variable_composes_its_suggestions_only_when_shown():
+    """A probe for a variable the FMU lacks (the master counts an FMU's knots that way at every
+    run's start) costs no difflib search; shown or pickled, the error reads as before."""
+    import pickle
+
+    from cosim.master.interface import declared_interface
+
+    interface = declared_interface("building")
+    with pytest.raises(KeyError) as probe:
+        interface.variable("t_knot[999]", "input")
+    assert probe.value._message is None
+    eager = KeyError(interface.unknown_variable_message("t_knot[999]", "input"))
+    assert str(probe.value) == str(eager) and "did you mean" in str(eager)
+    again = pickle.loads(pickle.dumps(probe.value))
+    assert type(again) is KeyError and str(again) == str(eager)
+
+
 def test_typed_set_get_and_vectorised_ports(building):
     inst = building.instantiate("b")
     try:

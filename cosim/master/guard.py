@@ -53,6 +53,9 @@ MAX_SUBSTEPS_PER_IMPACT = 5_000
 #: :data:`MAX_SUBSTEPS_PER_IMPACT` (four times the most seen in one doStep on the bundled scenes).
 SUBSTEPS_PER_STEP = 64
 
+#: ``ndarray.sum`` without its Python wrapper (checked after every step)
+_SUM = np.add.reduce
+
 
 class InstabilityError(RuntimeError):
     """A run produced numbers that cannot be trusted; the message says what to change.
@@ -228,6 +231,8 @@ class StabilityGuard:
         # energy stored at t0 in contacts that start closed (allow_initial_overlap): it is in
         # the system, and a contact that releases it reports it as negative dissipation
         self._stored0 = [lv.law.elastic_energy(lv.kinematics(system.y)[0]) for lv in self.levels]
+        self._work0 = -sum(self._stored0)        # the net work's start (J), summed once, not per step
+        self._resolved = all(lv.resolved for lv in self.levels)
         self.E_initial = sum(system.y.item(i) for i in self._i_mech) + sum(self._stored0)
         self.E_avail = self.E_initial
         self._limits = [0.0] * len(self.levels)
@@ -265,7 +270,7 @@ class StabilityGuard:
         """The first problem found after the step that ended at ``t`` (step ``h``), or None."""
         self.steps += 1
         y = self.system.y
-        if not math.isfinite(y.sum()):      # one reduction; a non-finite entry makes the sum non-finite
+        if not math.isfinite(_SUM(y)):      # one reduction; a non-finite entry makes the sum non-finite
             bad = self.system.columns[int(np.flatnonzero(~np.isfinite(y))[0])] if not np.isfinite(y).all() \
                 else "(sum of outputs)"
             return InstabilityError(f"t = {t:.6g} s: output {bad} is not finite: {self._advice(None, h)}",
@@ -295,7 +300,7 @@ class StabilityGuard:
                     f"(> {100 * self.energy_tol:g} % of the {self.E_avail:.3g} J put in): {self._advice(lv, h)}",
                     t, lv.name, "energy")
         if self.levels:
-            work = -sum(self._stored0)
+            work = self._work0
             for i in self._i_external:
                 work += item(i)
             if work > tol:
@@ -329,7 +334,7 @@ class StabilityGuard:
         for i, lv in enumerate(self.levels):
             if lv.j_impacts < 0:
                 continue
-            impacts = int(ints[lv.j_impacts])
+            impacts = ints.item(lv.j_impacts)
             total_impacts += impacts
             if impacts != self._impacts[i]:       # a new impact began in this step
                 self._impacts[i] = impacts
@@ -344,7 +349,7 @@ class StabilityGuard:
             # only steps in contact), so such a step adds nothing.
             touching = item(lv.i_F) != 0.0 or item(lv.i_delta) >= 0.0
             if touching or self._touching[i]:
-                self._substeps[i] += int(ints[lv.j_substeps])
+                self._substeps[i] += ints.item(lv.j_substeps)
             self._touching[i] = touching
             self._steps_since[i] += 1
             allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * self._steps_since[i]
@@ -356,7 +361,7 @@ class StabilityGuard:
                     f"40-90): {self._stuck(lv)}", t, lv.name, "work")
         refined = self.steps - t / self.base_step
         if self.levels:
-            per_impact = MAX_REFINED_STEPS_PER_IMPACT[all(lv.resolved for lv in self.levels)]
+            per_impact = MAX_REFINED_STEPS_PER_IMPACT[self._resolved]
             if refined > per_impact * (total_impacts + 1):
                 lv = max(self.levels, key=lambda lv: self.system.y.item(lv.i_delta))
                 return InstabilityError(

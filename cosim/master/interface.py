@@ -56,6 +56,32 @@ class VariableInfo:
         object.__setattr__(self, "index", index)
 
 
+class UnknownVariable(KeyError):
+    """A variable the FMU does not have: a ``KeyError`` that reads as
+    ``KeyError(FmuInterface.unknown_variable_message(...))`` but composes that message (its
+    suggestions come from difflib over every variable: about a millisecond) only when shown.  The
+    master probes for optional variables (how many ``t_knot[k]`` an FMU has, at every run's start)
+    and catches such errors unseen."""
+
+    def __init__(self, interface: "FmuInterface", name: str, causality: str | None):
+        super().__init__(name)
+        self._where = (interface, name, causality)
+        self._message: str | None = None
+
+    @property
+    def message(self) -> str:
+        if self._message is None:
+            interface, name, causality = self._where
+            self._message = interface.unknown_variable_message(name, causality)
+        return self._message
+
+    def __str__(self) -> str:
+        return repr(self.message)           # as KeyError shows its one argument
+
+    def __reduce__(self):                   # pickled (a study's worker) as the KeyError it reads as
+        return KeyError, (self.message,)
+
+
 class FmuInterface:
     """The variables of one FMU (``name``: ``pounding``, ``building``, ``ground_motion``)."""
 
@@ -70,7 +96,7 @@ class FmuInterface:
         try:
             info = self.variables[name]
         except KeyError:
-            raise KeyError(self.unknown_variable_message(name, causality)) from None
+            raise UnknownVariable(self, name, causality) from None
         if causality is not None and info.causality != causality:
             raise KeyError(f"{self.name}.fmu variable {name!r} is an {info.causality}, not a {causality}")
         return info

@@ -92,7 +92,7 @@ class GroundLookahead:
 
     def drop_before(self, t: float) -> None:
         """Forget the knots before the last one at or before ``t`` (the current step's start)."""
-        i = int(np.searchsorted(self.times, t, side="right")) - 1
+        i = int(self.times.searchsorted(t, side="right")) - 1
         if i > 0:
             self.times = self.times[i:]
             self.values = self.values[i:]
@@ -104,8 +104,8 @@ class GroundLookahead:
         is that end (its value differs by at most the slope times that distance)."""
         times, values = self.times, self.values
         snap = 1e-12 * (t1 - t0)
-        i0 = int(np.searchsorted(times, t0 + snap, side="right"))   # first knot after t0
-        i1 = int(np.searchsorted(times, t1 - snap, side="left"))    # first knot at or after t1
+        i0 = int(times.searchsorted(t0 + snap, side="right"))   # first knot after t0
+        i1 = int(times.searchsorted(t1 - snap, side="left"))    # first knot at or after t1
         # just after t0: the last knot at t0 (the later of a jump), else the line to the next one
         j = i0 - 1
         if j < 0:
@@ -134,5 +134,5 @@ class GroundLookahead:
     def knots_in(self, t0: float, t1: float) -> int:
         """How many knots :meth:`slice` would give over ``[t0, t1]``."""
         snap = 1e-12 * (t1 - t0)
-        return int(np.searchsorted(self.times, t1 - snap, side="left")
-                   - np.searchsorted(self.times, t0 + snap, side="right")) + 2
+        times = self.times
+        return int(times.searchsorted(t1 - snap, side="left") - times.searchsorted(t0 + snap, side="right")) + 2

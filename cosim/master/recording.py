@@ -39,6 +39,8 @@ if TYPE_CHECKING:
 RECORD_SETS = ("summary", "all")
 #: most history values (rows x columns) a run may keep: 2e8 doubles = 1.6 GB
 MAX_HISTORY_VALUES = 200_000_000
+#: ``ndarray.any`` without its Python wrapper (the peaks are tracked after every step)
+_ANY = np.logical_or.reduce
 
 
 def building_columns(system: "System", name: str, variables: Iterable[str]) -> list[str]:
@@ -223,30 +225,31 @@ class Recorder:
         if self._abs.size:
             v = np.abs(y[self._abs])
             up = v > self.abs_max
-            if up.any():
+            if _ANY(up):
                 self.abs_max[up] = v[up]
                 self.abs_time[up] = t_end
         if self._sgn.size:
             v = y[self._sgn]
             up = v > self.sgn_max
-            if up.any():
+            if _ANY(up):
                 self.sgn_max[up] = v[up]
                 self.sgn_time[up] = t_end
         item = y.item
+        was_active = self._active
         for node, i_impacts, i_F, i_delta in self._contacts:
+            name = node.spec.name
             active = item(i_F) != 0.0 or item(i_delta) >= 0.0
-            if active or self._active[node.name]:
+            if active or was_active[name]:
                 ints = node.integers.get()
                 count = int(ints[i_impacts])
-                if count > self.impacts[node.name]:
-                    self.onsets[node.name].append((t_start, t_end))
-                    if node.name not in self.first_onsets:
-                        self.first_onsets[node.name] = (y.item(self._ended[node.name][2][0])
-                                                        if node.name in self._ended else t_start)
-                    self.impacts[node.name] = count
-                if node.name in self._ended:
-                    self._contact_ended(node.name, ints, t_end)
-            self._active[node.name] = active
+                if count > self.impacts[name]:
+                    self.onsets[name].append((t_start, t_end))
+                    if name not in self.first_onsets:
+                        self.first_onsets[name] = y.item(self._ended[name][2][0]) if name in self._ended else t_start
+                    self.impacts[name] = count
+                if name in self._ended:
+                    self._contact_ended(name, ints, t_end)
+            was_active[name] = active
 
     def _contact_ended(self, name: str, ints, t_end: float) -> None:
         """Rows of impacts.csv for the contacts of ``name`` that ended in the step ending at

@@ -34,6 +34,9 @@ import numpy as np
 
 from .names import column, element_name
 
+#: ``ndarray.any`` without its Python wrapper (a window is looked for after every step)
+_ANY = np.logical_or.reduce
+
 if TYPE_CHECKING:
     from .system import System
 
@@ -219,7 +222,7 @@ class ContactWindowLog:
         """The step ``[t0, t1]`` was accepted."""
         now = self.system.y[self._index]
         f = self._forces
-        if f and (now[:f].any() or self._prev[:f].any()):
+        if f and (_ANY(now[:f]) or _ANY(self._prev[:f])):
             inputs = []
             for b in self._buildings:
                 # what the step was given: the coupling inputs, then its knots if it had any

@@ -243,7 +243,15 @@ class Adaptive(CouplingStrategy):
             self.long_levels = max(0, int(math.floor(math.log2(longest / self.h_max) + 1e-9)))
         self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
         self._kinematics: list = []                        # each level's (delta, rate, its rate) at the step start
-        self._now_active: list = []                        # each level's _active at the step start
+        self._now_active: list = []                        # each contact has something to do at the step start (_levels_now)
+        # where the step choice reads each level in System.y, and its gap (m): x1, x2, v1, v2, a1,
+        # a2 of the floors, the contact's F and delta (plain ints: item() on a few scalars per
+        # level is cheaper than numpy calls on arrays of a few levels, measured for 1 and 8)
+        self._level_reads = [(lv.ix1, lv.ix2, lv.iv1, lv.iv2, lv.ia1, lv.ia2, lv.i_F, lv.i_delta, lv.gap)
+                             for lv in self.levels]
+        # a closure predicted later than this (s) changes neither the step (at most h_max) nor the
+        # saving of states (a closure within risk_factor steps): _plan skips its time scales
+        self._far = 2.0 * max(1.0, self.risk_factor) * self.h_max
 
     def _knot_capacity(self) -> int:
         """Knots the ground FMU gives and every building takes (0: no knots)."""
@@ -299,22 +307,30 @@ class Adaptive(CouplingStrategy):
             level += 1
         return level
 
-    def _active(self, lv, kinematics) -> bool:
-        """A contact that has something to do now: a force, a closed gap (its own, or the host's:
-        ``kinematics``, the level's ``(delta, rate, its rate)`` now)."""
-        y = self.system.y
-        return y.item(lv.i_F) != 0.0 or y.item(lv.i_delta) >= 0.0 or kinematics[0] >= 0.0
+    def _levels_now(self) -> tuple[list, list]:
+        """Each level's kinematics ``(delta, rate, its rate)`` now (:meth:`_Level.kinematics`,
+        the same arithmetic) and whether its contact has something to do: a force, a closed
+        gap (its own, or the host's)."""
+        item = self.system.y.item
+        kinematics, active = [], []
+        for x1, x2, v1, v2, a1, a2, i_F, i_delta, gap in self._level_reads:
+            d = item(x1) - item(x2) - gap
+            kinematics.append((d, item(v1) - item(v2), item(a1) - item(a2)))
+            active.append(item(i_F) != 0.0 or item(i_delta) >= 0.0 or d >= 0.0)
+        return kinematics, active
 
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, closures)``: the longest safe step (s) and, for each gap that may close,
         ``(s*, h_keep)``: the earliest closure (s) and the longest step (s) accepted whatever
         closes in it (no state to save for it), from each level's kinematics now
-        (``_kinematics``, read by :meth:`step`)."""
+        (``_kinematics``, read by :meth:`step`).  A closure later than ``_far`` is left out: it
+        could change neither."""
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
         closures = []
         proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
+        far = self._far
         for lv, until, (d, dd, ddd) in zip(self.levels, self._proven, self._kinematics):
             if until >= proven:
                 continue
@@ -323,7 +339,7 @@ class Adaptive(CouplingStrategy):
                 continue
             A = self.accel_safety * abs(ddd) + a_extra
             s = closure_time(d, dd, A)
-            if s < math.inf:
+            if s <= far:
                 v_closing = max(dd, 0.0) + A * s                    # fastest possible approach at closure
                 h_contact = lv.in_contact_scale(0.0, v_closing, v_closing, self.contact_fraction)
                 h_target = min(h_target, max(s, h_contact))
@@ -390,12 +406,11 @@ class Adaptive(CouplingStrategy):
         cap = math.inf
         finest = 0                                               # a retry must be finer than the rejected step
         saved = None
-        y = system.y
         while True:
             # each level's kinematics and whether it has something to do, once per try (the
             # floors do not move before the buildings step, a contact's outputs not before it does)
-            self._kinematics = start = [lv.kinematics(y) for lv in self.levels]
-            self._now_active = [self._active(lv, k) for lv, k in zip(self.levels, start)]
+            self._kinematics, self._now_active = self._levels_now()
+            start = self._kinematics
             h_target, closures = self._plan()
             level = max(self._dyadic_level(min(h_target, cap)), finest)
             level = max(level, max(self._level, 0) - 1)          # grow by at most a factor 2 (below h_base)
@@ -506,8 +521,7 @@ class Adaptive(CouplingStrategy):
                 dormancy.wake(node)
                 node.step(y, t, h)
                 pending.remove(k)
-        for k in pending:
-            dormancy.skip(system.contacts[k], t, h)
+        dormancy.skip([system.contacts[k] for k in pending], t, h)
 
     def _forces(self, sleeping: list[int]) -> dict:
         """Floor forces (N) of the contacts that stepped, per building, held over the step."""
@@ -535,15 +549,15 @@ class Adaptive(CouplingStrategy):
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
         longer than that contact's contact step, else None."""
-        y = self.system.y
+        item = self.system.y.item
         retry = None
-        for lv, (d0, dd0, _) in zip(self.levels, start):
+        for lv, (d0, dd0, _), (x1, x2, v1, v2, *_, gap) in zip(self.levels, start, self._level_reads):
             if d0 > 0.0:
                 continue
-            d1, dd1, _ = lv.kinematics(y)
+            d1 = item(x1) - item(x2) - gap
             if d1 <= 0.0:
                 continue
-            v = max(dd0, dd1)
+            v = max(dd0, item(v1) - item(v2))
             h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
             if h <= h_contact * (1.0 + 1e-9) or h <= self.h_min * (1.0 + 1e-9):
                 continue
