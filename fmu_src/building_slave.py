@@ -158,6 +158,7 @@ class Building(Fmi2Slave):
         self._stepped_lengths = frozenset()
         self._derived_cache = None
         self._shear_fresh = False
+        self._ramps = False
         super().__init__(**kwargs)
         # Storey elements are checked only up to n_storeys (in validate): unused ones are ignored.
         self._element_checks = tuple(slot for slot in self._checked if slot[2] is not None)
@@ -258,6 +259,8 @@ class Building(Fmi2Slave):
         self._integrator = integrator
         self._legacy = hysteresis.model == "linear"   # the linear zero-order-hold step of old
         self._free_mass = building.is_free_mass
+        # one-interval steps through one matrix (_ramp_step): the exact integrator's laws
+        self._ramps = hysteresis.model in ("linear", "bilinear") and not self._free_mass
         self._n = n
         self._state = state
         self._derived_cache = None
@@ -413,6 +416,8 @@ class Building(Fmi2Slave):
             ag = float(self.ag)
             if not (math.isfinite(ag) and finite):
                 raise SlaveError(self._non_finite_input(ag, f))
+            if self._ramps and not self._legacy and self._ramp_step(step_size, (ag, ag), f):
+                return          # a bilinear building that stays elastic (a linear one: _linear_step)
             times, values = (0.0, step_size), (ag, ag)
         else:
             if not finite:
@@ -421,6 +426,8 @@ class Building(Fmi2Slave):
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
                                  "ag held over the step (n_knots = 0)")
             times, values = knots
+            if times.size == 2 and self._ramps and self._ramp_step(step_size, values, f):
+                return
         state = self._state
         # what to restore if the step is refused: the integrators replace the state's fields,
         # never change them in place, except the list of deferred peak searches
@@ -439,6 +446,41 @@ class Building(Fmi2Slave):
                              f"inputs or the step are beyond what its arithmetic supports (nothing was changed)")
         self._count(cost)
         self._publish(f)
+
+    def _ramp_step(self, step_size: float, values, f: np.ndarray) -> bool:
+        """A step of one knot interval (the ground acceleration linear over it, ``values`` at its
+        ends) of a linear building, or a step of a bilinear one (one knot interval, or ``ag``
+        held) that provably stays elastic, through one cached matrix
+        (``ExactPiecewiseLinear.ramp_step``); the linear building's outputs are rows of the same
+        product.  False, nothing changed, where the bilinear building needs :meth:`step`'s
+        general path (a storey yielding or possibly reaching its yield limit in the step)."""
+        ag0 = float(values[0])
+        ag1 = (values[1] - values[0]) / step_size      # advance's arithmetic (the same slope; 0 if held)
+        state = self._state
+        try:
+            w = self._integrator.ramp_step(state, step_size, ag0, float(ag1), f, self.cost)
+        except ValueError as exc:
+            raise SlaveError(f"{exc} (nothing was changed)") from None
+        if w is None:
+            return False
+        if not self._legacy:
+            self._publish(f)
+            return True
+        n = self._n
+        self.x[:n] = w[:n]
+        self.v[:n] = w[n:2 * n]
+        self.a[:n] = w[2 * n:3 * n]
+        self.drift[:n] = w[3 * n:4 * n]
+        self.base_shear = float(self._building.stiffnesses[0] * w[0])
+        k = 10 * n + 4                   # sqrt(m) v1, sqrt(k) d1 (RampStep's rows)
+        self.E_kinetic = 0.5 * float(w[k - 2 * n:k - n] @ w[k - 2 * n:k - n])
+        self.E_strain = 0.5 * float(w[k - n:k] @ w[k - n:k])
+        self.E_external = state.E_external
+        self.E_input = state.E_input
+        self.E_damping = state.E_damping
+        self._derived_cache = None
+        self._shear_fresh = False
+        return True
 
     def _count(self, cost: StepCost) -> None:
         total = self.cost
@@ -546,6 +588,9 @@ class Building(Fmi2Slave):
                 f"[{t:.9g}, {t + h:.9g}] s: feed the ground motion's knots of the same step (step the "
                 f"ground motion first, as Gauss-Seidel does; a Jacobi master hands over the previous "
                 f"step's) or set n_knots = 0")
+        if count == 2:
+            # the ends only (in order: within 1e-9 h of t and t + h), relative to the step start
+            return np.array((0.0, h)), values
         if listed != sorted(listed):
             i = int(np.flatnonzero(np.diff(times) < 0.0)[0])
             raise SlaveError(f"input t_knot must not decrease: t_knot[{i + 1}] = {times[i]:.9g} s > "

@@ -1,0 +1,179 @@
+"""building.fmu's one-interval step through one matrix (issues 17 and 18): a step of one knot
+interval (the ground acceleration linear over it) of a linear building, and a step of a bilinear
+building that provably stays elastic, cost one product (``ExactPiecewiseLinear.ramp_step``) and
+give what the general path (``ExactPiecewiseLinear._interval`` with the segment map of that
+length) gives: state, energies and outputs to round-off (1e-12 relative: both evaluate the same
+exact solution, summed in another order), the same running peaks and the same deferred in-step
+peak searches, the same peaks after them.  The ramp of the ground acceleration is what makes
+these steps differ from a zero-order hold: each comparison also checks that the same step
+without its ramp differs by far more than the tolerance (so the test would fail if the ramp
+term were dropped).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fmu_src.building_response import StepCost, integrator_for
+from fmu_src.building_slave import Building
+from fmu_src.fmi_slave import SlaveError
+from fmu_src.ground_records import load_record
+from fmu_src.hysteresis import StoreyHysteresis
+from fmu_src.record_knots import step_knots
+from fmu_src.shear_building import ShearBuilding
+
+G = 9.80665
+# both paths evaluate the same exact solution with the same matrices summed in another order:
+# round-off of a few ulp of the terms' magnitudes (measured below 1e-14 of each quantity's scale)
+RTOL = 1e-12
+
+
+def building(n: int, model: str):
+    b = ShearBuilding.from_period(0.3 + 0.1 * n, np.full(n, 3e5), np.linspace(1.0, 0.5, n), 0.05)
+    fy = 0.1 * n * 3e5 * G * np.linspace(1.0, 0.4, n) if model == "bilinear" else None
+    hysteresis = StoreyHysteresis(model, fy, 0.05) if fy is not None else StoreyHysteresis("linear")
+    return integrator_for(b, hysteresis)
+
+
+def random_state(it, rng, model):
+    n = it.n
+    scale = it.dy if model == "bilinear" else np.full(n, 0.02)
+    d = rng.uniform(-0.5, 0.5, n) * scale
+    st = it.initial_state(np.cumsum(d), rng.normal(scale=0.2, size=n) * scale / 0.02)
+    if model == "bilinear":
+        st.slip = rng.uniform(-0.3, 0.3, n) * scale          # yielded before, elastic now
+        st.offset = None
+    st.E_input, st.E_damping, st.E_external = rng.uniform(1e3, 1e4, 3)
+    # running peaks: some functions below what the step reaches (searched), some above (cleared)
+    st.peaks = st.peaks * rng.uniform(0.3, 3.0, st.peaks.size)
+    st.pending = []
+    return st
+
+
+def scales(st):
+    return np.max(np.abs(st.u)), np.max(np.abs(st.v))
+
+
+@pytest.mark.parametrize("model", ["linear", "bilinear"])
+@pytest.mark.parametrize("n", [1, 3, 8])
+def test_a_one_interval_step_through_one_matrix_equals_the_interval_path(model, n):
+    rng = np.random.default_rng(17 + n)
+    it = building(n, model)
+    taken = refused = 0
+    for trial in range(60):
+        h = (0.01, 0.02, 0.005, 0.0037)[trial % 4]
+        st = random_state(it, rng, model)
+        ag0 = rng.normal(scale=3.0)
+        ag1 = rng.normal(scale=3.0) / h                  # the record moves by ~3 m/s^2 in the interval
+        force = rng.normal(scale=1e5, size=n)
+        fast, slow = st.snapshot(), st.snapshot()
+        fast_cost, slow_cost = StepCost(), StepCost()
+        w = it.ramp_step(fast, h, ag0, ag1, force, fast_cost)
+        events = it._interval(slow, h, ag0, ag1, force, slow_cost, h, 0.0)
+        if w is None:
+            # a bilinear storey may reach its limit: the state is untouched, the general path decides
+            refused += 1
+            assert model == "bilinear"
+            for name in ("u", "v", "slip", "peaks"):
+                np.testing.assert_array_equal(getattr(fast, name), getattr(st, name))
+            assert fast.pending == [] and fast_cost == StepCost()
+            continue
+        taken += 1
+        assert events == 0 and slow_cost.events == 0
+        su, sv = scales(slow)
+        np.testing.assert_allclose(fast.u, slow.u, rtol=0.0, atol=RTOL * su)
+        np.testing.assert_allclose(fast.v, slow.v, rtol=0.0, atol=RTOL * sv)
+        np.testing.assert_array_equal(fast.slip, slow.slip)
+        for name in ("E_input", "E_damping", "E_external", "E_hysteretic"):
+            # the increments, against the step's own energy scale
+            inc_fast = getattr(fast, name) - getattr(st, name)
+            inc_slow = getattr(slow, name) - getattr(st, name)
+            scale = abs(slow.E_input - st.E_input) + abs(slow.E_damping - st.E_damping) + abs(
+                slow.E_external - st.E_external) + 1e-300
+            assert abs(inc_fast - inc_slow) <= RTOL * scale, name
+        # peaks: the same end values recorded, the same searches deferred (bounds to round-off)
+        np.testing.assert_allclose(fast.peaks, slow.peaks, rtol=RTOL)
+        assert [e[0] for e in fast.pending] == [e[0] for e in slow.pending]
+        np.testing.assert_allclose([e[1] for e in fast.pending], [e[1] for e in slow.pending], rtol=RTOL)
+        assert (fast_cost.cleared, fast_cost.peaks_deferred) == (slow_cost.cleared, slow_cost.peaks_deferred)
+        it.resolve_peaks(fast)
+        it.resolve_peaks(slow)
+        np.testing.assert_allclose(fast.peaks, slow.peaks, rtol=RTOL)
+        # the ramp matters: the same step with the ground acceleration held at ag0 ends far away
+        held = st.snapshot()
+        it.ramp_step(held, h, ag0, 0.0, force, StepCost())
+        assert np.max(np.abs(held.v - slow.v)) > 1e3 * RTOL * sv
+        assert abs((held.E_input - st.E_input) - (slow.E_input - st.E_input)) > 1e3 * RTOL * abs(
+            slow.E_input - st.E_input)
+    assert taken >= 15
+    if model == "bilinear":
+        assert refused > 0          # both outcomes seen
+
+
+def slave(n, model, ramps=True):
+    b = Building(instance_name=f"b{n}", resources=None, visible=False, logger=None)
+    b.n_storeys = n
+    b.T1 = 0.5
+    b.m[:n] = 3e5
+    b.k[:n] = np.linspace(1.0, 0.6, n)
+    if model == "bilinear":
+        b.hysteresis = model
+        b.Fy[:n] = 0.1 * n * 3e5 * G * np.linspace(1.0, 0.4, n)
+    b.exit_initialization_mode()
+    assert b._error is None
+    b._ramps = ramps and b._ramps       # False: every step through ExactPiecewiseLinear.advance
+    return b
+
+
+@pytest.mark.parametrize("model,knots", [("linear", True), ("bilinear", True), ("bilinear", False)])
+def test_every_output_of_a_record_run_equals_the_general_path(model, knots):
+    """Two instances through 20 s of El Centro at 0.3 g in 10 ms steps with a floor force, one
+    with the one-matrix step, one without: every output at every step within 1e-12 of its scale,
+    the same work counters, the same peaks after every search."""
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * G / rec.pga)
+    n = 3
+    fast, slow = slave(n, model), slave(n, model, ramps=False)
+    outputs = [vr for vr, var in fast.vars.items() if var.causality.name == "output"
+               and type(var).__name__ == "Real" and ("[" not in var.name or int(var.name[:-1].split("[")[1]) <= n)
+               and var.name.split("[")[0] not in ("x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")]
+    runs = {id(fast): [], id(slow): []}
+    h = 0.01
+    for i in range(2000):
+        t = i * h
+        kt, ka = step_knots(rec, t, t + h)
+        for b in (fast, slow):
+            if knots:
+                b.n_knots = len(kt)
+                b.t_knot[:len(kt)] = kt
+                b.ag_knot[:len(kt)] = ka
+            else:
+                b.ag = rec.mean_over(t, t + h)
+            b.F[:n] = 2e5 * np.sin(0.7 * t) * np.arange(1, n + 1) / n
+            assert b.do_step(t, h), b._error
+            runs[id(b)].append(b.get_real(outputs))
+    a, b_ = np.array(runs[id(fast)]), np.array(runs[id(slow)])
+    scale = np.max(np.abs(b_), axis=0)
+    assert np.all(np.abs(a - b_) <= RTOL * scale)
+    assert fast.cost == slow.cost
+    if model == "bilinear":
+        assert fast.cost.events > 0          # the building yields: both paths taken in the run
+    peaks = [vr for vr, var in fast.vars.items() if var.name.split("[")[0] in ("x_peak", "drift_peak", "a_peak")]
+    np.testing.assert_allclose(fast.get_real(peaks), slow.get_real(peaks), rtol=RTOL)
+
+
+def test_a_non_finite_ramp_step_is_refused_with_nothing_changed():
+    b = slave(3, "linear")
+    b.n_knots = 2
+    b.t_knot[:2] = [0.0, 0.01]
+    b.ag_knot[:2] = [1.0, 2.0]
+    assert b.do_step(0.0, 0.01)
+    saved = (b._state.u.copy(), b._state.v.copy(), b._state.E_input, b.x[:3].copy())
+    b.t_knot[:2] = [0.01, 0.02]
+    b.ag_knot[:2] = [1.0, 1e308]          # finite knots, a slope that overflows the state
+    with pytest.raises(SlaveError, match="not finite.*nothing was changed"), np.errstate(all="ignore"):
+        b.step(0.01, 0.01)
+    np.testing.assert_array_equal(b._state.u, saved[0])
+    np.testing.assert_array_equal(b._state.v, saved[1])
+    assert b._state.E_input == saved[2]
+    np.testing.assert_array_equal(b.x[:3], saved[3])
