@@ -36,14 +36,26 @@ def building(n: int, model: str):
 
 
 def random_state(it, rng, model):
+    """A state of ``it`` about its elastic range: for "bilinear" every storey elastic (yielded
+    before: a slip), for "yielding" some storeys yielding (on their yield limit, loading)."""
     n = it.n
-    scale = it.dy if model == "bilinear" else np.full(n, 0.02)
+    scale = it.dy if model != "linear" else np.full(n, 0.02)
     d = rng.uniform(-0.5, 0.5, n) * scale
-    st = it.initial_state(np.cumsum(d), rng.normal(scale=0.2, size=n) * scale / 0.02)
-    if model == "bilinear":
-        st.slip = rng.uniform(-0.3, 0.3, n) * scale          # yielded before, elastic now
+    rates = rng.normal(scale=0.2, size=n) * scale / 0.02
+    mode = np.zeros(n, dtype=np.int64)
+    if model == "yielding":
+        mode = rng.choice([-1, 0, 1], n)
+        if not mode.any():
+            mode[rng.integers(n)] = 1
+        # loading (mode d' > 0), most of them fast enough to keep loading over the step
+        rates = np.where(mode != 0, mode * (np.abs(rates) + scale / 0.01), rates)
+    st = it.initial_state(np.cumsum(d), np.cumsum(rates))
+    if model != "linear":
+        st.slip = rng.uniform(-0.3, 0.3, n) * scale                   # yielded before
+        st.slip = np.where(mode != 0, d - mode * it.dy, st.slip)      # yielding: |d - s| = dy
+        st.mode = mode
         st.offset = None
-    st.E_input, st.E_damping, st.E_external = rng.uniform(1e3, 1e4, 3)
+    st.E_input, st.E_damping, st.E_external, st.E_hysteretic = rng.uniform(1e3, 1e4, 4)
     # running peaks: some functions below what the step reaches (searched), some above (cleared)
     st.peaks = st.peaks * rng.uniform(0.3, 3.0, st.peaks.size)
     st.pending = []
@@ -54,18 +66,20 @@ def scales(st):
     return np.max(np.abs(st.u)), np.max(np.abs(st.v))
 
 
-@pytest.mark.parametrize("model", ["linear", "bilinear"])
+@pytest.mark.parametrize("model", ["linear", "bilinear", "yielding"])
 @pytest.mark.parametrize("n", [1, 3, 8])
 def test_a_one_interval_step_through_one_matrix_equals_the_interval_path(model, n):
     rng = np.random.default_rng(17 + n)
-    it = building(n, model)
+    it = building(n, "linear" if model == "linear" else "bilinear")
     taken = refused = 0
-    for trial in range(60):
+    for trial in range(100):
         h = (0.01, 0.02, 0.005, 0.0037)[trial % 4]
         st = random_state(it, rng, model)
         ag0 = rng.normal(scale=3.0)
         ag1 = rng.normal(scale=3.0) / h                  # the record moves by ~3 m/s^2 in the interval
         force = rng.normal(scale=1e5, size=n)
+        if model == "yielding":
+            it.configuration(st.mode).segment_map(h)     # a yield pattern's map (the fast path needs it)
         fast, slow = st.snapshot(), st.snapshot()
         fast_cost, slow_cost = StepCost(), StepCost()
         w = it.ramp_step(fast, h, ag0, ag1, force, fast_cost)
@@ -73,8 +87,8 @@ def test_a_one_interval_step_through_one_matrix_equals_the_interval_path(model, 
         if w is None:
             # a bilinear storey may reach its limit: the state is untouched, the general path decides
             refused += 1
-            assert model == "bilinear"
-            for name in ("u", "v", "slip", "peaks"):
+            assert model != "linear"
+            for name in ("u", "v", "slip", "mode", "peaks"):
                 np.testing.assert_array_equal(getattr(fast, name), getattr(st, name))
             assert fast.pending == [] and fast_cost == StepCost()
             continue
@@ -83,13 +97,14 @@ def test_a_one_interval_step_through_one_matrix_equals_the_interval_path(model, 
         su, sv = scales(slow)
         np.testing.assert_allclose(fast.u, slow.u, rtol=0.0, atol=RTOL * su)
         np.testing.assert_allclose(fast.v, slow.v, rtol=0.0, atol=RTOL * sv)
-        np.testing.assert_array_equal(fast.slip, slow.slip)
+        np.testing.assert_array_equal(fast.mode, slow.mode)
+        np.testing.assert_allclose(fast.slip, slow.slip, rtol=0.0, atol=RTOL * su)
         for name in ("E_input", "E_damping", "E_external", "E_hysteretic"):
             # the increments, against the step's own energy scale
             inc_fast = getattr(fast, name) - getattr(st, name)
             inc_slow = getattr(slow, name) - getattr(st, name)
-            scale = abs(slow.E_input - st.E_input) + abs(slow.E_damping - st.E_damping) + abs(
-                slow.E_external - st.E_external) + 1e-300
+            scale = sum(abs(getattr(slow, e) - getattr(st, e)) for e in
+                        ("E_input", "E_damping", "E_external", "E_hysteretic")) + 1e-300
             assert abs(inc_fast - inc_slow) <= RTOL * scale, name
         # peaks: the same end values recorded, the same searches deferred (bounds to round-off)
         np.testing.assert_allclose(fast.peaks, slow.peaks, rtol=RTOL)
@@ -105,9 +120,9 @@ def test_a_one_interval_step_through_one_matrix_equals_the_interval_path(model, 
         assert np.max(np.abs(held.v - slow.v)) > 1e3 * RTOL * sv
         assert abs((held.E_input - st.E_input) - (slow.E_input - st.E_input)) > 1e3 * RTOL * abs(
             slow.E_input - st.E_input)
-    assert taken >= 15
-    if model == "bilinear":
-        assert refused > 0          # both outcomes seen
+    assert taken >= 10
+    if model != "linear":
+        assert refused > 0 or n == 1          # both outcomes seen (one storey: most steps taken)
 
 
 def slave(n, model, ramps=True):
