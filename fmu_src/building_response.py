@@ -40,6 +40,10 @@ step where nothing happens costs a few vector operations:
 A yielding building meets many stiffness configurations (yield patterns), most of them for a
 few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
 ``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length serves them.
+A step of one knot interval in a configuration with such a map takes one product with a matrix
+made from it (:meth:`ExactPiecewiseLinear.ramp_step`, :class:`RampStep`): the end state, the
+energy increments and tier 1 at once, with the decisions of the general path; a step that tier
+1 and its second-order test cannot clear of events is left to the general path.
 
 Bouc-Wen peaks are located on the dense output of every Runge-Kutta step where the
 derivative changes sign.  The absolute acceleration is the building's own, ``M^-1 (f - C v -
