@@ -192,3 +192,53 @@ def test_a_non_finite_ramp_step_is_refused_with_nothing_changed():
     np.testing.assert_array_equal(b._state.v, saved[1])
     assert b._state.E_input == saved[2]
     np.testing.assert_array_equal(b.x[:3], saved[3])
+
+
+@pytest.mark.parametrize("model", ["linear", "bilinear"])
+def test_a_long_interval_is_split_into_the_record_intervals_with_the_same_response(model):
+    """A record's last samples leave a long interval to the end of the run (El Centro: 0.31 s
+    after a 10 ms one): ``_even_intervals`` splits it into 10 ms intervals on the same polyline,
+    so the step takes the cached map of 10 ms instead of building one of 0.31 s for one step.
+    The response equals the one interval by interval with the long interval's own map: state and
+    energies to round-off, peaks to the searches' precision; no map of the long length is made."""
+    from fmu_src.building_response import _even_intervals
+    from fmu_src.linear_response import PEAK_RTOL
+
+    rng = np.random.default_rng(5)
+    # the knots: ten 10 ms intervals, a jump, a 0.19 s interval, a 10 ms one (as at a record's end)
+    times = np.concatenate([0.01 * np.arange(11), [0.1, 0.29, 0.30]])
+    ag = rng.normal(scale=2.0, size=times.size)
+    new_times, new_ag = _even_intervals(times, ag)
+    lengths = np.diff(new_times)
+    assert new_times.size == 32 and np.count_nonzero(lengths == 0.0) == 1
+    np.testing.assert_allclose(lengths[lengths > 0.0], 0.01, rtol=1e-12)
+    for t, a in zip(new_times, new_ag):       # on the polyline (at the jump: on one of its sides)
+        sides = [ag[j] + (t - times[j]) / (times[j + 1] - times[j]) * (ag[j + 1] - ag[j])
+                 for j in range(times.size - 1) if times[j] <= t <= times[j + 1] and times[j + 1] > times[j]]
+        assert min(abs(a - v) for v in sides) <= 1e-12 * (1.0 + abs(a))
+    # nothing to split: the knots as given
+    for uniform in (0.01 * np.arange(5), np.array([0.0, 0.01, 0.025])):
+        out, _ = _even_intervals(uniform, np.zeros(uniform.size))
+        assert out is uniform
+    it = building(5, model)
+    st = random_state(it, rng, model if model == "linear" else "bilinear")
+    st.peaks[:] = 0.0
+    split, whole = st.snapshot(), st.snapshot()
+    force = rng.normal(scale=1e5, size=5)
+    it.advance(split, times, ag, force)
+    assert not it.configuration(np.zeros(5, dtype=np.int64)).has_map(0.19)
+    cost = StepCost()
+    for j in range(times.size - 1):
+        L = times[j + 1] - times[j]
+        if L > 0.0:
+            it._interval(whole, L, ag[j], (ag[j + 1] - ag[j]) / L, force, cost, times[-1], times[j])
+    su, sv = scales(whole)
+    np.testing.assert_allclose(split.u, whole.u, rtol=0.0, atol=RTOL * su)
+    np.testing.assert_allclose(split.v, whole.v, rtol=0.0, atol=RTOL * sv)
+    np.testing.assert_array_equal(split.mode, whole.mode)
+    scale = sum(abs(getattr(whole, e)) for e in ("E_input", "E_damping", "E_external", "E_hysteretic"))
+    for e in ("E_input", "E_damping", "E_external", "E_hysteretic"):
+        assert abs(getattr(split, e) - getattr(whole, e)) <= RTOL * scale, e
+    it.resolve_peaks(split)
+    it.resolve_peaks(whole)
+    np.testing.assert_allclose(split.peaks, whole.peaks, rtol=2 * PEAK_RTOL)
