@@ -40,10 +40,10 @@ step where nothing happens costs a few vector operations:
 A yielding building meets many stiffness configurations (yield patterns), most of them for a
 few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
 ``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length serves them.
-A step of one knot interval in a configuration with such a map takes one product with a matrix
-made from it (:meth:`ExactPiecewiseLinear.ramp_step`, :class:`RampStep`): the end state, the
-energy increments and tier 1 at once, with the decisions of the general path; a step that tier
-1 and its second-order test cannot clear of events is left to the general path.
+A linear building's step of one knot interval takes one product with a matrix made from the
+segment map of its length (:meth:`ExactPiecewiseLinear.ramp_step`, :class:`RampStep`): the end
+state, the outputs, the energy increments and tier 1 at once, with the decisions of the general
+path.
 
 Bouc-Wen peaks are located on the dense output of every Runge-Kutta step where the
 derivative changes sign.  The absolute acceleration is the building's own, ``M^-1 (f - C v -
@@ -83,7 +83,7 @@ MAX_SPLIT_INTERVALS = 32    # intervals a step's long intervals are split into a
 # a knot interval shorter than this fraction of its step is a sliver left by the round-off of
 # knot times (2e-12 of a 10 ms step measured), taken as a jump (_even_intervals)
 SLIVER = 1e-11
-MAX_RAMP_STEPS = 64         # configurations with one-interval step matrices (RampStep), lengths per configuration
+MAX_RAMP_STEPS = 64         # one-interval step matrices (RampStep) by canonical length per building
 # Bouc-Wen's work per communication step.  The span: the same bound as the exact integrator's
 # quadrature (MAX_CHUNKS chunks of CHUNK_RATE / |lambda|), |lambda| h <= 8192, about 1300 periods
 # of the fastest elastic mode; a longer step (h = 1e6 s ran for minutes) is refused before any
@@ -193,23 +193,21 @@ class StepCost:
 
 @dataclass(frozen=True)
 class RampStep:
-    """A one-interval step of length ``length`` (s) of one stiffness configuration ``cfg``, the
-    ground acceleration linear over it (first-order hold), as one matrix
-    (:meth:`ExactPiecewiseLinear.ramp_step`).
+    """A linear building's one-interval step of length ``length`` (s), the ground acceleration
+    linear over it (first-order hold), as one matrix (:meth:`ExactPiecewiseLinear.ramp_step`).
 
-    ``matrix @ y`` with ``y = [u0; v0; ag0; ag1; p]`` (``ag1`` the slope, m/s^3; ``p`` the net
-    floor force, N) gives, in rows of this order: the end state ``[u1; v1]`` (2n), the absolute
-    accelerations ``a1`` with ``p / m`` (n), the drifts ``d1`` (n), ``u1 - u0`` (n), the two
-    input-energy rows ``r0, r1`` (``E_input`` increment ``= ag0 r0 y + ag1 r1 y``), ``Q y`` (the
-    damping form, ``E_damping`` increment ``= y' Q y``; 3n + 2), ``sqrt(m) v1`` and ``sqrt(k)
-    d1`` (n each: twice the kinetic and the linear strain energy as sums of squares; the linear
-    building's outputs), then from row ``start`` what tier 1 needs: ``Re, Im W z'(0)`` (4n), the
-    watched functions at 0 (x, drift, a with ``p / m``, drift rate; 4n) and ``ag1``.  ``reach @
-    |that|`` is the tier-1 reach of every tracked function (3n: its value at 0 plus the change
-    bound, the ramp's term included), then the change bounds alone of the drifts and of the
-    drift rates (n each: whether a bilinear storey may yield or unload).  Built from the
-    segment map (``smap``) that :meth:`ExactPiecewiseLinear._interval` uses: the same physics,
-    one product instead of a dozen numpy calls.
+    ``matrix @ y`` with ``y = [u0; v0; ag0; ag1; f]`` (``ag1`` the slope, m/s^3; ``f`` the floor
+    forces, N) gives, in rows of this order: the end state ``[u1; v1]`` (2n), the absolute
+    accelerations ``a1`` (n), the drifts ``d1`` (n), ``u1 - u0`` (n), the two input-energy rows
+    ``r0, r1`` (``E_input`` increment ``= ag0 r0 y + ag1 r1 y``), ``Q y`` (the damping form,
+    ``E_damping`` increment ``= y' Q y``; 3n + 2), ``sqrt(m) v1`` and ``sqrt(k) d1`` (n each,
+    from row :func:`ramp_energy_rows`: twice the kinetic and the strain energy as sums of
+    squares), then from row ``start`` what tier 1 needs: ``Re, Im W z'(0)`` (4n), the tracked
+    functions at 0 (x, drift, a; 3n) and ``ag1``; ``reach @ |that|`` is tier 1's reach of every
+    tracked function (its value at 0 plus the change bound, the ramp's term included).  Built
+    from the segment map (``smap``, of the elastic configuration ``cfg``) that
+    :meth:`ExactPiecewiseLinear._interval` uses: the same physics, one product instead of a
+    dozen numpy calls.
     """
 
     length: float
@@ -232,6 +230,10 @@ def _floor_forces(V: np.ndarray) -> np.ndarray:
     out[:-1] -= V[1:]
     return out
 
+
+def ramp_energy_rows(n: int) -> int:
+    """The first row of ``sqrt(m) v1`` in :class:`RampStep`'s product (``sqrt(k) d1`` follows)."""
+    return 8 * n + 4
 
 def _even_intervals(times: np.ndarray, ag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The knots of a step with every interval that is an integer multiple (to round-off) of the
@@ -374,9 +376,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._shear_memo = None
         limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
         self._second_order_limits = (limit, -limit)
-        # one-interval step matrices per configuration (by id, None: a linear building's one):
-        # (configuration, by exact length, by canonical length)
-        self._ramp_index: dict[int, tuple] = {}
+        # a linear building's one-interval step matrices by canonical length, and by every
+        # exact length asked (ramp_step)
+        self._ramps: dict[float, RampStep] = {}
+        self._ramp_aliases: dict[float, RampStep] = {}
         self._ramp_y = np.zeros(3 * n + 2)     # work buffer [u0; v0; ag0; ag1; p]
 
     # -- bilinear storey state -----------------------------------------------------------------
@@ -1156,63 +1159,29 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._peaks(cfg, scan, None, state, y, y[2 * n + 2:], h, EVENT_XTOL * h, cost, flags)
 
 
-    # -- a one-interval step through one matrix (building_slave) ------------------------------
-    def ramp_step(self, state, h: float, ag0: float, ag1: float, force, cost: StepCost) -> np.ndarray | None:
-        """One knot interval of ``h`` s (ground acceleration ``ag0 + ag1 s``, m/s^2) through one
-        cached matrix (:class:`RampStep`): what :meth:`advance` does for these two knots
-        (:meth:`_interval` with the segment map of this length, the same tests and decisions),
-        with one product instead of a dozen numpy calls.
-
-        Returns ``w``, the product of :class:`RampStep` (the linear building's outputs are
-        rows of it; ``cost`` counts the step), or None, the state untouched, where this path
-        does not apply: a bilinear building whose storeys may change state in the step (tier
-        1 and its second-order test cannot rule out a yield or unloading event: :meth:`advance`
-        locates it), or whose yield pattern has no segment map of this length yet (the map is
-        built from the pattern's ``MAP_AFTER_SEGMENTS + 1``-th segment, :meth:`_worth_a_map`).
-        Raises ValueError, the state untouched, if the step would leave the state not finite
-        or the segment map cannot be made (:meth:`Configuration.chunk_nodes`)."""
+    # -- a linear building's one-interval step through one matrix (building_slave) ------------
+    def ramp_step(self, state, h: float, ag0: float, ag1: float, force, cost: StepCost) -> np.ndarray:
+        """One knot interval of ``h`` s (ground acceleration ``ag0 + ag1 s``, m/s^2) of a linear
+        building through one cached matrix (:class:`RampStep`): what :meth:`advance` does for
+        these two knots (:meth:`_interval` with the segment map of this length: the same end
+        state, energies and tier-1 decisions, the same in-step peak tests where tier 1 leaves a
+        function), with one product instead of a dozen numpy calls.  Returns the product
+        (the building's outputs are rows of it); ``cost`` counts the step.  Raises ValueError,
+        the state untouched, if the step would leave the state not finite or the segment map
+        cannot be made (:meth:`Configuration.chunk_nodes`)."""
         n = self.n
         two_n = 2 * n
         m = 3 * n
-        inelastic = self._inelastic
-        if inelastic:
-            _, cfg, elastic, yielding = self._mode_facts(state.mode)
-            p = self._net_force(state, force)
-        else:
-            cfg, yielding, p = None, False, force
-        plan = self._ramp_plan(cfg, h, yielding)
+        plan = self._ramp_aliases.get(h)
         if plan is None:
-            return None
+            plan = self._ramp_plan(h)
         y = self._ramp_y
         y[:n] = state.u
         y[n:two_n] = state.v
         y[two_n] = ag0
         y[two_n + 1] = ag1
-        y[two_n + 2:] = p
+        y[two_n + 2:] = force
         w = plan.matrix @ y
-        start = w[plan.start:]
-        reach = plan.reach @ np.abs(start)
-        flags = reach[:m] > state.peaks           # strict, as _interval
-        scan_vector = None
-        if inelastic:
-            # _interval's tier 1: elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
-            e0 = start[5 * n:6 * n] - state.slip
-            rate0 = start[7 * n:8 * n]
-            drift_reach, rate_reach = reach[m:4 * n], reach[4 * n:]
-            if yielding:
-                mode = state.mode
-                margin = np.where(elastic, self.dy - np.abs(e0) - drift_reach, mode * rate0 - rate_reach)
-            else:
-                margin = self.dy - np.abs(e0) - drift_reach
-            if not margin.min() > 0.0:
-                # and to second order, as _interval; a storey that may still change state: advance
-                up_flags = elastic & (e0 + drift_reach >= self.dy)
-                down_flags = elastic & (e0 - drift_reach <= -self.dy)
-                unload_flags = ~elastic & (mode * rate0 - rate_reach <= 0.0) if yielding else np.zeros(n, dtype=bool)
-                scan_vector = plan.smap.scan @ y
-                if not self._second_order_quiet(plan.cfg, state, elastic, e0, rate0, scan_vector, ag1, h,
-                                                up_flags, down_flags, unload_flags):
-                    return None
         i = 4 * n                            # u1 - u0, then the input rows, then Q y
         j = i + n + 2
         e_damp = float(y @ w[j:j + m + 2])
@@ -1222,56 +1191,40 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             raise ValueError(f"a step of h = {h!r} s would leave the building's state not finite: the inputs "
                              f"or the step are beyond what its arithmetic supports")
         cost.segments += 1
-        if not flags.any():
-            cost.cleared += 1
+        flags = plan.reach @ np.abs(w[plan.start:]) > state.peaks        # strict, as _interval
+        if flags.any():
+            scan = Scan(plan.cfg, plan.smap.scan @ y, ag1, h)
+            self._peaks(plan.cfg, scan, None, state, y, force, h, EVENT_XTOL * h, cost, flags)
         else:
-            if scan_vector is None:
-                scan_vector = plan.smap.scan @ y
-            scan = Scan(plan.cfg, scan_vector, ag1, h)
-            self._peaks(plan.cfg, scan, None, state, y, p, h, EVENT_XTOL * h, cost, flags)
+            cost.cleared += 1
         state.E_external += d_ext
         state.E_damping += e_damp
         state.E_input += e_in
-        u1 = w[:n]                          # views of the fresh product: nothing else writes to w
-        if yielding:
-            self._yield_along(state, u1)
-        state.u = u1
+        state.u = w[:n]                     # views of the fresh product: nothing else writes to w
         state.v = w[n:two_n]
         return w
 
-    def _ramp_plan(self, cfg: Configuration | None, h: float, yielding: bool) -> RampStep | None:
-        """The :class:`RampStep` of configuration ``cfg`` (None: the linear building's one) and
-        ``h`` s, built once per canonical length and remembered by every exact length asked;
-        None for a yield pattern without a segment map of this length (see :meth:`ramp_step`)."""
-        index = self._ramp_index.get(id(cfg))
-        if index is None or index[0] is not cfg:
-            if len(self._ramp_index) >= MAX_RAMP_STEPS:
-                self._ramp_index.clear()
-            index = self._ramp_index[id(cfg)] = (cfg, {}, {})   # (cfg kept: its id is not reused)
-        _, aliases, plans = index
-        plan = aliases.get(h)
+    def _ramp_plan(self, h: float) -> RampStep:
+        """The :class:`RampStep` of ``h`` s, built once per canonical length (from the segment
+        map :meth:`_interval` would use) and remembered by every exact length asked."""
+        key = canonical_length(h)
+        plan = self._ramps.get(key)
         if plan is None:
-            if yielding and not cfg.has_map(h):
-                return None
-            key = canonical_length(h)
-            plan = plans.get(key)
-            if plan is None:
-                if len(plans) >= MAX_RAMP_STEPS:
-                    plans.clear()
-                    aliases.clear()
-                plan = plans[key] = self._make_ramp_plan(
-                    self.configuration(np.zeros(self.n, dtype=np.int64)) if cfg is None else cfg, key)
-            if len(aliases) >= 4 * MAX_RAMP_STEPS:
-                aliases.clear()
-            aliases[h] = plan
+            if len(self._ramps) >= MAX_RAMP_STEPS:
+                self._ramps.pop(next(iter(self._ramps)))
+            plan = self._ramps[key] = self._make_ramp_plan(key)
+        if len(self._ramp_aliases) >= 4 * MAX_RAMP_STEPS:
+            self._ramp_aliases.clear()
+        self._ramp_aliases[h] = plan
         return plan
 
-    def _make_ramp_plan(self, cfg: Configuration, h: float) -> RampStep:
+    def _make_ramp_plan(self, h: float) -> RampStep:
         n = self.n
-        two_n, m, size = 2 * self.n, 3 * self.n, 3 * self.n + 2
+        two_n, m, size = 2 * n, 3 * n, 3 * n + 2
+        cfg = self.configuration(np.zeros(n, dtype=np.int64))
         smap = cfg.segment_map(h)
         S = smap.state
-        net = np.zeros((n, size))                 # p / m
+        net = np.zeros((n, size))                 # f / m
         net[:, two_n + 2:] = np.diag(self._inv_m)
         accel = cfg.peak_rows[two_n:] @ S + net
         drift = self._drift_rows @ S[:n]
@@ -1284,23 +1237,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         r1 = 2.0 * form[two_n + 1]
         r1[two_n] = 0.0
         r1[two_n + 1] = form[two_n + 1, two_n + 1]
-        watched = np.zeros((4 * n, size))
-        watched[:, :two_n] = cfg.watch_rows
-        watched[two_n:m] += net
+        watched = np.zeros((m, size))
+        watched[:, :two_n] = cfg.watch_rows[:m]
+        watched[two_n:] += net
         slope = np.zeros((1, size))
         slope[0, two_n + 1] = 1.0
         matrix = np.vstack([S, accel, drift, du, r0, r1, smap.damping, np.sqrt(self.masses)[:, None] * S[n:],
                             np.sqrt(self.k)[:, None] * drift, smap.scan[-4 * n:], watched, slope])
-        # reach @ [|Re|, |Im| W z'(0) (4n); |watched| (4n); |ag1|]: the watched functions' reach
-        # (3n), then the change bounds alone of the drifts and of the drift rates (n each)
-        reach = np.zeros((5 * n, 8 * n + 1))
-        reach[:m, :4 * n] = smap.change[:m]
-        reach[:m, 4 * n:7 * n] = np.eye(m)
-        reach[:m, 8 * n] = smap.ramp_change[:m]
-        for row, watch in ((m, n), (4 * n, m)):
-            reach[row:row + n, :4 * n] = smap.change[watch:watch + n]
-            reach[row:row + n, 8 * n] = smap.ramp_change[watch:watch + n]
-        return RampStep(h, cfg, smap, np.ascontiguousarray(matrix), reach, matrix.shape[0] - (8 * n + 1))
+        # reach @ [|Re|, |Im| W z'(0) (4n); |watched| (3n); |ag1|]: _interval's tier-1 bound plus |g(0)|
+        reach = np.zeros((m, 7 * n + 1))
+        reach[:, :4 * n] = smap.change[:m]
+        reach[:, 4 * n:7 * n] = np.eye(m)
+        reach[:, 7 * n] = smap.ramp_change[:m]
+        return RampStep(h, cfg, smap, np.ascontiguousarray(matrix), reach, matrix.shape[0] - (7 * n + 1))
 
 class BoucWenRK(BuildingIntegrator):
     """Bouc-Wen storeys, embedded Runge-Kutta 8(5,3) with error control (see module docstring)."""

@@ -26,8 +26,7 @@ cached per step length to round-off (``linear_response.canonical_length``); the 
 a length, which a run may take only once, from the modal solution instead of building that
 matrix; otherwise the modal solution with yield and unloading events located inside the step,
 a step over several record intervals of one length in one product, a step of one record
-interval, or a bilinear step that provably stays free of yield and unloading events, in one
-product with a matrix cached per stiffness configuration and length); Bouc-Wen by an embedded
+interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen by an embedded
 Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
 ``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
@@ -42,7 +41,7 @@ import math
 
 import numpy as np
 
-from .building_response import StepCost, integrator_for
+from .building_response import StepCost, integrator_for, ramp_energy_rows
 from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
 from .hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
 from .linear_response import canonical_length
@@ -261,8 +260,10 @@ class Building(Fmi2Slave):
         self._integrator = integrator
         self._legacy = hysteresis.model == "linear"   # the linear zero-order-hold step of old
         self._free_mass = building.is_free_mass
-        # one-interval steps through one matrix (_ramp_step): the exact integrator's laws
-        self._ramps = hysteresis.model in ("linear", "bilinear") and not self._free_mass
+        # a one-interval knot step through one matrix (_ramp_step): linear storeys (a bilinear
+        # building's steps measured no cheaper that way: they publish through the integrator, and
+        # the steps that may yield paid for the product before taking the general path)
+        self._ramps = self._legacy and not self._free_mass
         self._n = n
         self._state = state
         self._derived_cache = None
@@ -418,8 +419,6 @@ class Building(Fmi2Slave):
             ag = float(self.ag)
             if not (math.isfinite(ag) and finite):
                 raise SlaveError(self._non_finite_input(ag, f))
-            if self._ramps and not self._legacy and self._ramp_step(step_size, (ag, ag), f):
-                return          # a bilinear building that stays elastic (a linear one: _linear_step)
             times, values = (0.0, step_size), (ag, ag)
         else:
             if not finite:
@@ -428,7 +427,8 @@ class Building(Fmi2Slave):
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
                                  "ag held over the step (n_knots = 0)")
             times, values = knots
-            if times.size == 2 and self._ramps and self._ramp_step(step_size, values, f):
+            if times.size == 2 and self._ramps:
+                self._ramp_step(step_size, values, f)
                 return
         state = self._state
         # what to restore if the step is refused: the integrators replace the state's fields,
@@ -449,40 +449,31 @@ class Building(Fmi2Slave):
         self._count(cost)
         self._publish(f)
 
-    def _ramp_step(self, step_size: float, values, f: np.ndarray) -> bool:
-        """A step of one knot interval (the ground acceleration linear over it, ``values`` at its
-        ends) of a linear building, or a step of a bilinear one (one knot interval, or ``ag``
-        held) that provably stays elastic, through one cached matrix
-        (``ExactPiecewiseLinear.ramp_step``); the linear building's outputs are rows of the same
-        product.  False, nothing changed, where the bilinear building needs :meth:`step`'s
-        general path (a storey yielding or possibly reaching its yield limit in the step)."""
+    def _ramp_step(self, step_size: float, values: np.ndarray, f: np.ndarray) -> None:
+        """A step of one knot interval of a linear building (the ground acceleration linear over
+        it, ``values`` at its ends) through one cached matrix (``ExactPiecewiseLinear.ramp_step``):
+        the outputs are rows of the same product, as in :meth:`_linear_step`."""
         ag0 = float(values[0])
-        ag1 = (values[1] - values[0]) / step_size      # advance's arithmetic (the same slope; 0 if held)
+        ag1 = (values[1] - values[0]) / step_size      # advance's arithmetic (the same slope)
         state = self._state
         try:
             w = self._integrator.ramp_step(state, step_size, ag0, float(ag1), f, self.cost)
         except ValueError as exc:
             raise SlaveError(f"{exc} (nothing was changed)") from None
-        if w is None:
-            return False
-        if not self._legacy:
-            self._publish(f)
-            return True
         n = self._n
         self.x[:n] = w[:n]
         self.v[:n] = w[n:2 * n]
         self.a[:n] = w[2 * n:3 * n]
         self.drift[:n] = w[3 * n:4 * n]
         self.base_shear = float(self._building.stiffnesses[0] * w[0])
-        k = 10 * n + 4                   # sqrt(m) v1, sqrt(k) d1 (RampStep's rows)
-        self.E_kinetic = 0.5 * float(w[k - 2 * n:k - n] @ w[k - 2 * n:k - n])
-        self.E_strain = 0.5 * float(w[k - n:k] @ w[k - n:k])
+        k = ramp_energy_rows(n)         # sqrt(m) v1, then sqrt(k) d1
+        self.E_kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
+        self.E_strain = 0.5 * float(w[k + n:k + 2 * n] @ w[k + n:k + 2 * n])
         self.E_external = state.E_external
         self.E_input = state.E_input
         self.E_damping = state.E_damping
         self._derived_cache = None
         self._shear_fresh = False
-        return True
 
     def _count(self, cost: StepCost) -> None:
         total = self.cost
