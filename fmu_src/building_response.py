@@ -469,7 +469,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
-        if times.size > 2:
+        if times.size > 2 and self._inelastic:
+            # (a linear building's steps go through _advance_batch, which splits them itself at
+            # no cost to the uniform steps; a yielding building's may go interval by interval)
             times, ag = _even_intervals(times, ag)
         if times.size > 3 or (times.size == 3 and not self._inelastic):
             # worth batching (None: an event may occur, interval by interval)
@@ -527,11 +529,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             ag0 = ag[idx]
             slope = (ag[idx + 1] - ag[idx]) / lengths[idx]
             positive = lengths[idx].tolist()
+        shortest, longest = min(positive), max(positive)
+        if longest > 1.5 * shortest and not inelastic:
+            # a long interval or a sliver, split or merged before any map is made for it (a
+            # yielding building's in advance)
+            even_times, even_ag = _even_intervals(times, ag)
+            if even_times is not times:
+                return self._advance_batch(state, even_times, even_ag, force)
         count = len(positive)
         first = cfg.segment_map(positive[0])
         # one length (to round-off) for every interval: canonical_length is monotonic, so the
         # shortest and the longest sharing a map means all do (every step of a run, measured)
-        shortest, longest = min(positive), max(positive)
         uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
                    and (longest == positive[0] or cfg.segment_map(longest) is first))
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
