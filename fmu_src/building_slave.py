@@ -26,8 +26,8 @@ cached per step length to round-off (``linear_response.canonical_length``); the 
 a length, which a run may take only once, from the modal solution instead of building that
 matrix; otherwise the modal solution with yield and unloading events located inside the step,
 a step over several record intervals of one length in one product, a step of one record
-interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen by an embedded
-Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
+interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen
+by an embedded Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
 ``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
 ``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
