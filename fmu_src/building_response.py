@@ -469,15 +469,15 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
-        if times.size > 2 and self._inelastic:
-            # (a linear building's steps go through _advance_batch, which splits them itself at
-            # no cost to the uniform steps; a yielding building's may go interval by interval)
-            times, ag = _even_intervals(times, ag)
         if times.size > 3 or (times.size == 3 and not self._inelastic):
             # worth batching (None: an event may occur, interval by interval)
             cost = self._advance_batch(state, times, ag, force)
             if cost is not None:
                 return cost
+        if times.size > 2:
+            # interval by interval: no segment map made for one step either (_advance_batch
+            # splits its steps itself, from the lengths it computes anyway)
+            times, ag = _even_intervals(times, ag)
         cost = StepCost()
         events = 0
         h = float(times[-1] - times[0])
@@ -530,9 +530,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             slope = (ag[idx + 1] - ag[idx]) / lengths[idx]
             positive = lengths[idx].tolist()
         shortest, longest = min(positive), max(positive)
-        if longest > 1.5 * shortest and not inelastic:
-            # a long interval or a sliver, split or merged before any map is made for it (a
-            # yielding building's in advance)
+        if longest > 1.5 * shortest:
+            # a long interval or a sliver, split or merged before any map is made for it
             even_times, even_ag = _even_intervals(times, ag)
             if even_times is not times:
                 return self._advance_batch(state, even_times, even_ag, force)
