@@ -119,7 +119,7 @@ def main(argv=None) -> int:
     rec = rec.scaled(0.3 * G / rec.pga)
     cases = [(n, "linear", 0.01, False) for n in BUILDINGS] + \
             [(n, "linear", 0.01, True) for n in (3, 5)] + [(n, "linear", 0.16, True) for n in (3, 5, 15)] + \
-            [(n, "bilinear", 0.01, False) for n in (3, 5)] + [(3, "bilinear", 0.16, True)] + \
+            [(n, "bilinear", 0.01, False) for n in (3, 5)] + [(3, "bilinear", 0.01, True), (3, "bilinear", 0.16, True)] + \
             [(3, "bouc_wen", 0.01, False)]
     print(f"{'storeys':>7} {'law':>9} {'hold':>6} {'h (s)':>6} {'us/step':>9} {'us/interval':>12} "
           f"{'cleared':>8} {'peaks d/s':>10} {'roots':>6} {'events':>7} {'max mu':>7}")

@@ -40,6 +40,10 @@ step where nothing happens costs a few vector operations:
 A yielding building meets many stiffness configurations (yield patterns), most of them for a
 few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
 ``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length serves them.
+A linear building's step of one knot interval takes one product with a matrix made from the
+segment map of its length (:meth:`ExactPiecewiseLinear.ramp_step`, :class:`RampStep`): the end
+state, the outputs, the energy increments and tier 1 at once, with the decisions of the general
+path.
 
 Bouc-Wen peaks are located on the dense output of every Runge-Kutta step where the
 derivative changes sign.  The absolute acceleration is the building's own, ``M^-1 (f - C v -
@@ -59,8 +63,8 @@ from scipy.optimize import brentq
 
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, TaylorSegment,
-                              first_root, hermite_range_scalar, max_abs)
+from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
+                              canonical_length, first_root, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -75,6 +79,11 @@ MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
 MAX_PLANS = 16              # segment maps with a batch plan (ExactPiecewiseLinear._batch_plan) per building
 MAX_CHAINS = 8              # interval counts with a chain (ExactPiecewiseLinear._chain) per plan
 MAP_AFTER_SEGMENTS = 2      # ad hoc segments of a yield pattern before its segment map is built
+MAX_SPLIT_INTERVALS = 32    # intervals a step's long intervals are split into at most (_even_intervals)
+# a knot interval shorter than this fraction of its step is a sliver left by the round-off of
+# knot times (2e-12 of a 10 ms step measured), taken as a jump (_even_intervals)
+SLIVER = 1e-11
+MAX_RAMP_STEPS = 64         # one-interval step matrices (RampStep) by canonical length per building
 # Bouc-Wen's work per communication step.  The span: the same bound as the exact integrator's
 # quadrature (MAX_CHUNKS chunks of CHUNK_RATE / |lambda|), |lambda| h <= 8192, about 1300 periods
 # of the fastest elastic mode; a longer step (h = 1e6 s ran for minutes) is refused before any
@@ -182,6 +191,33 @@ class StepCost:
     event_log: list = field(default_factory=list)   # (time in the step (s), storey index, kind)
 
 
+@dataclass(frozen=True)
+class RampStep:
+    """A linear building's one-interval step of length ``length`` (s), the ground acceleration
+    linear over it (first-order hold), as one matrix (:meth:`ExactPiecewiseLinear.ramp_step`).
+
+    ``matrix @ y`` with ``y = [u0; v0; ag0; ag1; f]`` (``ag1`` the slope, m/s^3; ``f`` the floor
+    forces, N) gives, in rows of this order: the end state ``[u1; v1]`` (2n), the absolute
+    accelerations ``a1`` (n), the drifts ``d1`` (n), ``u1 - u0`` (n), the two input-energy rows
+    ``r0, r1`` (``E_input`` increment ``= ag0 r0 y + ag1 r1 y``), ``Q y`` (the damping form,
+    ``E_damping`` increment ``= y' Q y``; 3n + 2), ``sqrt(m) v1`` and ``sqrt(k) d1`` (n each,
+    from row :func:`ramp_energy_rows`: twice the kinetic and the strain energy as sums of
+    squares), then from row ``start`` what tier 1 needs: ``Re, Im W z'(0)`` (4n), the tracked
+    functions at 0 (x, drift, a; 3n) and ``ag1``; ``reach @ |that|`` is tier 1's reach of every
+    tracked function (its value at 0 plus the change bound, the ramp's term included).  Built
+    from the segment map (``smap``, of the elastic configuration ``cfg``) that
+    :meth:`ExactPiecewiseLinear._interval` uses: the same physics, one product instead of a
+    dozen numpy calls.
+    """
+
+    length: float
+    cfg: Configuration
+    smap: SegmentMap
+    matrix: np.ndarray
+    reach: np.ndarray
+    start: int
+
+
 def _drift(u: np.ndarray) -> np.ndarray:
     d = u.copy()
     d[1:] -= u[:-1]
@@ -193,6 +229,58 @@ def _floor_forces(V: np.ndarray) -> np.ndarray:
     out = V.copy()
     out[:-1] -= V[1:]
     return out
+
+
+def ramp_energy_rows(n: int) -> int:
+    """The first row of ``sqrt(m) v1`` in :class:`RampStep`'s product (``sqrt(k) d1`` follows)."""
+    return 8 * n + 4
+
+def _even_intervals(times: np.ndarray, ag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The knots of a step with every interval that is an integer multiple (to round-off) of the
+    shortest one split into intervals of that length, the ground acceleration interpolated
+    linearly at the new knots (the same polyline: the same exact response); the knots as given
+    if none is, or if the split would give more than ``MAX_SPLIT_INTERVALS``.  First, an
+    interval shorter than ``SLIVER`` of the step becomes a jump (see below).
+
+    A record's last samples leave one long interval to the end of the run (El Centro: 0.19 and
+    0.31 s after 10 ms ones); its segment map, made for that one step, cost 7 and 13 ms for 15
+    storeys (the energy forms' quadrature grows with the length), where the record's own
+    interval has its map already: split, the step is uniform and takes the cached chain.
+    """
+    lengths = times[1:] - times[:-1]
+    short, longest = float(lengths.min()), float(lengths.max())
+    if not longest > 1.5 * short:
+        return times, ag                             # one length (to round-off), no jump: most steps
+    slivers = (lengths > 0.0) & (lengths <= SLIVER * (times[-1] - times[0]))
+    if slivers.any():
+        # a record sample within round-off of a step end (28.79000000000002 s in a step from
+        # 28.79 s): its interval of 2e-14 s would get a segment map of its own (1.9 ms for 15
+        # storeys); the knot moves onto its neighbour and the sliver becomes a jump (the velocity
+        # changes by the ground acceleration's change across the sliver times its length less)
+        times = times.copy()
+        last = times.size - 1
+        for j in slivers.nonzero()[0].tolist():
+            if j + 1 < last:
+                times[j + 1] = times[j]
+            else:
+                times[j] = times[j + 1]
+        lengths = times[1:] - times[:-1]
+    positive = lengths[lengths > 0.0]
+    if positive.size < 2:
+        return times, ag
+    short = float(positive.min())
+    if not longest > 1.5 * short:
+        return times, ag
+    pieces = np.rint(lengths / short)
+    # integer multiples only (to the round-off of a host's knot times, far below 1e-9)
+    pieces = np.where(np.abs(lengths - pieces * short) <= 1e-9 * lengths, pieces, 1.0).astype(np.int64)
+    pieces[lengths <= 0.0] = 1                       # a jump stays a jump (and passes no time)
+    if pieces.max() == 1 or int(pieces[lengths > 0.0].sum()) > MAX_SPLIT_INTERVALS:
+        return times, ag
+    fractions = [np.arange(k) / k for k in pieces.tolist()]
+    new_times = np.concatenate([t + f * L for t, L, f in zip(times[:-1], lengths, fractions)] + [times[-1:]])
+    new_ag = np.concatenate([a + f * (b - a) for a, b, f in zip(ag[:-1], ag[1:], fractions)] + [ag[-1:]])
+    return new_times, new_ag
 
 
 class BuildingIntegrator:
@@ -288,6 +376,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._shear_memo = None
         limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
         self._second_order_limits = (limit, -limit)
+        # a linear building's one-interval step matrices by canonical length, and by every
+        # exact length asked (ramp_step)
+        self._ramps: dict[float, RampStep] = {}
+        self._ramp_aliases: dict[float, RampStep] = {}
+        self._ramp_y = np.zeros(3 * n + 2)     # work buffer [u0; v0; ag0; ag1; p]
 
     # -- bilinear storey state -----------------------------------------------------------------
     def _law_facts(self, mode: np.ndarray):
@@ -381,6 +474,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             cost = self._advance_batch(state, times, ag, force)
             if cost is not None:
                 return cost
+        if times.size > 2:
+            # interval by interval: no segment map made for one step either (_advance_batch
+            # splits its steps itself, from the lengths it computes anyway)
+            times, ag = _even_intervals(times, ag)
         cost = StepCost()
         events = 0
         h = float(times[-1] - times[0])
@@ -432,11 +529,16 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             ag0 = ag[idx]
             slope = (ag[idx + 1] - ag[idx]) / lengths[idx]
             positive = lengths[idx].tolist()
+        shortest, longest = min(positive), max(positive)
+        if longest > 1.5 * shortest:
+            # a long interval or a sliver, split or merged before any map is made for it
+            even_times, even_ag = _even_intervals(times, ag)
+            if even_times is not times:
+                return self._advance_batch(state, even_times, even_ag, force)
         count = len(positive)
         first = cfg.segment_map(positive[0])
         # one length (to round-off) for every interval: canonical_length is monotonic, so the
         # shortest and the longest sharing a map means all do (every step of a run, measured)
-        shortest, longest = min(positive), max(positive)
         uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
                    and (longest == positive[0] or cfg.segment_map(longest) is first))
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
@@ -1063,6 +1165,98 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         scan = Scan(cfg, scan_rows @ y_zoh, 0.0, h)
         self._peaks(cfg, scan, None, state, y, y[2 * n + 2:], h, EVENT_XTOL * h, cost, flags)
 
+
+    # -- a linear building's one-interval step through one matrix (building_slave) ------------
+    def ramp_step(self, state, h: float, ag0: float, ag1: float, force, cost: StepCost) -> np.ndarray:
+        """One knot interval of ``h`` s (ground acceleration ``ag0 + ag1 s``, m/s^2) of a linear
+        building through one cached matrix (:class:`RampStep`): what :meth:`advance` does for
+        these two knots (:meth:`_interval` with the segment map of this length: the same end
+        state, energies and tier-1 decisions, the same in-step peak tests where tier 1 leaves a
+        function), with one product instead of a dozen numpy calls.  Returns the product
+        (the building's outputs are rows of it); ``cost`` counts the step.  Raises ValueError,
+        the state untouched, if the step would leave the state not finite or the segment map
+        cannot be made (:meth:`Configuration.chunk_nodes`)."""
+        n = self.n
+        two_n = 2 * n
+        m = 3 * n
+        plan = self._ramp_aliases.get(h)
+        if plan is None:
+            plan = self._ramp_plan(h)
+        y = self._ramp_y
+        y[:n] = state.u
+        y[n:two_n] = state.v
+        y[two_n] = ag0
+        y[two_n + 1] = ag1
+        y[two_n + 2:] = force
+        w = plan.matrix @ y
+        i = 4 * n                            # u1 - u0, then the input rows, then Q y
+        j = i + n + 2
+        e_damp = float(y @ w[j:j + m + 2])
+        e_in = ag0 * float(w[i + n]) + ag1 * float(w[i + n + 1])
+        d_ext = float(force @ w[i:i + n])
+        if not math.isfinite(e_damp + e_in + d_ext + float(w[:two_n].sum())):
+            raise ValueError(f"a step of h = {h!r} s would leave the building's state not finite: the inputs "
+                             f"or the step are beyond what its arithmetic supports")
+        cost.segments += 1
+        flags = plan.reach @ np.abs(w[plan.start:]) > state.peaks        # strict, as _interval
+        if flags.any():
+            scan = Scan(plan.cfg, plan.smap.scan @ y, ag1, h)
+            self._peaks(plan.cfg, scan, None, state, y, force, h, EVENT_XTOL * h, cost, flags)
+        else:
+            cost.cleared += 1
+        state.E_external += d_ext
+        state.E_damping += e_damp
+        state.E_input += e_in
+        state.u = w[:n]                     # views of the fresh product: nothing else writes to w
+        state.v = w[n:two_n]
+        return w
+
+    def _ramp_plan(self, h: float) -> RampStep:
+        """The :class:`RampStep` of ``h`` s, built once per canonical length (from the segment
+        map :meth:`_interval` would use) and remembered by every exact length asked."""
+        key = canonical_length(h)
+        plan = self._ramps.get(key)
+        if plan is None:
+            if len(self._ramps) >= MAX_RAMP_STEPS:
+                self._ramps.pop(next(iter(self._ramps)))
+            plan = self._ramps[key] = self._make_ramp_plan(key)
+        if len(self._ramp_aliases) >= 4 * MAX_RAMP_STEPS:
+            self._ramp_aliases.clear()
+        self._ramp_aliases[h] = plan
+        return plan
+
+    def _make_ramp_plan(self, h: float) -> RampStep:
+        n = self.n
+        two_n, m, size = 2 * n, 3 * n, 3 * n + 2
+        cfg = self.configuration(np.zeros(n, dtype=np.int64))
+        smap = cfg.segment_map(h)
+        S = smap.state
+        net = np.zeros((n, size))                 # f / m
+        net[:, two_n + 2:] = np.diag(self._inv_m)
+        accel = cfg.peak_rows[two_n:] @ S + net
+        drift = self._drift_rows @ S[:n]
+        du = S[:n] - np.eye(n, size)
+        # y' I y with the input form I, which is zero outside the rows and columns of ag0 and ag1
+        # (-int (1'M v)(ag0 + ag1 s) ds is linear in ag0 and ag1): ag0 r0 y + ag1 r1 y
+        form = smap.input
+        r0 = 2.0 * form[two_n]
+        r0[two_n] = form[two_n, two_n]
+        r1 = 2.0 * form[two_n + 1]
+        r1[two_n] = 0.0
+        r1[two_n + 1] = form[two_n + 1, two_n + 1]
+        watched = np.zeros((m, size))
+        watched[:, :two_n] = cfg.watch_rows[:m]
+        watched[two_n:] += net
+        slope = np.zeros((1, size))
+        slope[0, two_n + 1] = 1.0
+        matrix = np.vstack([S, accel, drift, du, r0, r1, smap.damping, np.sqrt(self.masses)[:, None] * S[n:],
+                            np.sqrt(self.k)[:, None] * drift, smap.scan[-4 * n:], watched, slope])
+        # reach @ [|Re|, |Im| W z'(0) (4n); |watched| (3n); |ag1|]: _interval's tier-1 bound plus |g(0)|
+        reach = np.zeros((m, 7 * n + 1))
+        reach[:, :4 * n] = smap.change[:m]
+        reach[:, 4 * n:7 * n] = np.eye(m)
+        reach[:, 7 * n] = smap.ramp_change[:m]
+        return RampStep(h, cfg, smap, np.ascontiguousarray(matrix), reach, matrix.shape[0] - (7 * n + 1))
 
 class BoucWenRK(BuildingIntegrator):
     """Bouc-Wen storeys, embedded Runge-Kutta 8(5,3) with error control (see module docstring)."""

@@ -25,8 +25,9 @@ linear zero-order-hold step is one matrix-vector product with the matrix of earl
 cached per step length to round-off (``linear_response.canonical_length``); the first step of
 a length, which a run may take only once, from the modal solution instead of building that
 matrix; otherwise the modal solution with yield and unloading events located inside the step,
-a step over several record intervals of one length in one product); Bouc-Wen by an embedded
-Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
+a step over several record intervals of one length in one product, a step of one record
+interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen
+by an embedded Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
 ``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
 ``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
@@ -40,7 +41,7 @@ import math
 
 import numpy as np
 
-from .building_response import StepCost, integrator_for
+from .building_response import StepCost, integrator_for, ramp_energy_rows
 from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
 from .hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
 from .linear_response import canonical_length
@@ -158,6 +159,7 @@ class Building(Fmi2Slave):
         self._stepped_lengths = frozenset()
         self._derived_cache = None
         self._shear_fresh = False
+        self._ramps = False
         super().__init__(**kwargs)
         # Storey elements are checked only up to n_storeys (in validate): unused ones are ignored.
         self._element_checks = tuple(slot for slot in self._checked if slot[2] is not None)
@@ -258,6 +260,10 @@ class Building(Fmi2Slave):
         self._integrator = integrator
         self._legacy = hysteresis.model == "linear"   # the linear zero-order-hold step of old
         self._free_mass = building.is_free_mass
+        # a one-interval knot step through one matrix (_ramp_step): linear storeys (a bilinear
+        # building's steps measured no cheaper that way: they publish through the integrator, and
+        # the steps that may yield paid for the product before taking the general path)
+        self._ramps = self._legacy and not self._free_mass
         self._n = n
         self._state = state
         self._derived_cache = None
@@ -421,6 +427,9 @@ class Building(Fmi2Slave):
                 raise SlaveError("n_knots > 0 needs a building with storeys: a free mass (k[1] = 0) takes "
                                  "ag held over the step (n_knots = 0)")
             times, values = knots
+            if times.size == 2 and self._ramps:
+                self._ramp_step(step_size, values, f)
+                return
         state = self._state
         # what to restore if the step is refused: the integrators replace the state's fields,
         # never change them in place, except the list of deferred peak searches
@@ -439,6 +448,32 @@ class Building(Fmi2Slave):
                              f"inputs or the step are beyond what its arithmetic supports (nothing was changed)")
         self._count(cost)
         self._publish(f)
+
+    def _ramp_step(self, step_size: float, values: np.ndarray, f: np.ndarray) -> None:
+        """A step of one knot interval of a linear building (the ground acceleration linear over
+        it, ``values`` at its ends) through one cached matrix (``ExactPiecewiseLinear.ramp_step``):
+        the outputs are rows of the same product, as in :meth:`_linear_step`."""
+        ag0 = float(values[0])
+        ag1 = (values[1] - values[0]) / step_size      # advance's arithmetic (the same slope)
+        state = self._state
+        try:
+            w = self._integrator.ramp_step(state, step_size, ag0, float(ag1), f, self.cost)
+        except ValueError as exc:
+            raise SlaveError(f"{exc} (nothing was changed)") from None
+        n = self._n
+        self.x[:n] = w[:n]
+        self.v[:n] = w[n:2 * n]
+        self.a[:n] = w[2 * n:3 * n]
+        self.drift[:n] = w[3 * n:4 * n]
+        self.base_shear = float(self._building.stiffnesses[0] * w[0])
+        k = ramp_energy_rows(n)         # sqrt(m) v1, then sqrt(k) d1
+        self.E_kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
+        self.E_strain = 0.5 * float(w[k + n:k + 2 * n] @ w[k + n:k + 2 * n])
+        self.E_external = state.E_external
+        self.E_input = state.E_input
+        self.E_damping = state.E_damping
+        self._derived_cache = None
+        self._shear_fresh = False
 
     def _count(self, cost: StepCost) -> None:
         total = self.cost
@@ -546,6 +581,9 @@ class Building(Fmi2Slave):
                 f"[{t:.9g}, {t + h:.9g}] s: feed the ground motion's knots of the same step (step the "
                 f"ground motion first, as Gauss-Seidel does; a Jacobi master hands over the previous "
                 f"step's) or set n_knots = 0")
+        if count == 2:
+            # the ends only (in order: within 1e-9 h of t and t + h), relative to the step start
+            return np.array((0.0, h)), values
         if listed != sorted(listed):
             i = int(np.flatnonzero(np.diff(times) < 0.0)[0])
             raise SlaveError(f"input t_knot must not decrease: t_knot[{i + 1}] = {times[i]:.9g} s > "
