@@ -515,6 +515,13 @@ class OpenGaps:
         # building -> (its reads as bytes, _BuildingState): a step proves its gaps over a few
         # horizons from the same state (the long step, the quiet horizon, the step)
         self._states: dict = {}
+        # every building linear (no elastic range, no bound through yielding): the proof is
+        # :meth:`_linear_horizons`, with the per-building and per-pair work it caches below
+        self._all_linear = not self.elastic and not self.yielded
+        # building -> (its reads as bytes, modal state, its floors' rate bound, horizon -> Q)
+        self._linear_states: dict = {}
+        # which levels (None: all) -> per pair, what the linear proof reuses (:meth:`_linear_plan`)
+        self._plans: dict = {}
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
@@ -613,9 +620,11 @@ class OpenGaps:
         each, as :func:`open_horizon` does for one level, with the same arithmetic).  A level
         of a bilinear building that this linear proof leaves short of ``H`` is proven again
         through yielding (:meth:`_through_yielding`), and keeps the longer horizon."""
+        forces = forces or {}
+        if self._all_linear:
+            return self._linear_horizons(y, H, ground, forces, which)
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
-        forces = forces or {}
         pairs = self._pairs(which)
         out = [0.0] * sum(len(p[2]) for p in pairs)
         dS = H / GRID
@@ -678,6 +687,109 @@ class OpenGaps:
                     for i, s in zip(short, through):
                         pos = positions[i]
                         out[pos] = max(out[pos], s)
+        return out
+
+    # -- linear buildings: the same arithmetic as :meth:`horizons`' linear proof, in fewer calls ----
+    def _linear_plan(self, which: Sequence[int] | None) -> list:
+        """Per pair of :meth:`_pairs`: ``[left, right, positions, fl, fr, gap, answer buffer,
+        comparison buffer, horizon -> (ground rows of the left floors, of the right floors)]``.
+
+        The free motion stays ``(phi @ Q)[fl]``, not ``phi[fl] @ Q``: OpenBLAS computes a
+        product's rows alike only for some row counts (a single row differs in its last bits),
+        so only every floor's product gives the general proof's numbers.  The answer
+        buffer holds, per level, ``delta(0)`` then the grid intervals' upper bounds then a
+        sentinel ``1``: one comparison and one ``argmax`` find whether the gap is closed now,
+        the first interval that may close and whether none does."""
+        key = None if which is None else tuple(which)
+        plan = self._plans.get(key)
+        if plan is not None:
+            return plan
+        plan = []
+        for left, right, positions, fl, fr, gap in self._pairs(which):
+            answer = np.empty((fl.size, GRID + 2))
+            answer[:, -1] = 1.0
+            plan.append([left, right, positions, fl, fr, gap,
+                         answer, np.empty((fl.size, GRID + 2), dtype=bool), {}])
+        if len(self._plans) < _PAIRS_KEPT:
+            self._plans[key] = plan
+        return plan
+
+    def _linear_state(self, b: str, y: np.ndarray) -> list:
+        """Building ``b``'s ``[reads as bytes, modal state, every floor's free rate bound, horizon
+        -> every floor's free motion]`` (:meth:`ModalBound.modal_state`, ``|phi| @ speed`` as :class:`FloorMotion`
+        computes it), kept while its floors' state is the same."""
+        reads = y[self._reads[b]]
+        key = reads.tobytes()
+        known = self._linear_states.get(b)
+        if known is not None and known[0] == key:
+            return known
+        bound = self.buildings[b][0]
+        n = bound.n
+        modal = bound.modal_state(reads[:n], reads[n:])
+        state = self._linear_states[b] = [key, modal, bound.abs_phi @ modal[2], {}]
+        return state
+
+    def _linear_horizons(self, y: np.ndarray, H: float, ground, forces: dict,
+                         which: Sequence[int] | None) -> list[float]:
+        """:meth:`horizons` when every building is linear: per building, the floors' free motion
+        (kept per state and horizon); per pair, the levels' floors only, with the same
+        operations in the same order as :meth:`horizons` (and :class:`FloorMotion`), so the
+        same horizons to the last bit."""
+        plan = self._linear_plan(which)
+        out = [0.0] * sum(len(p[2]) for p in plan)
+        dS = H / GRID
+        if callable(ground):
+            ground = ground()
+        tail = ground[1:]
+        states = {}
+        for left, right, positions, fl, fr, gap, answer, bad, by_h in plan:
+            rows = by_h.get(H)
+            if rows is None:
+                if len(by_h) > 64:            # a bounded number of distinct step lengths
+                    by_h.pop(next(iter(by_h)))
+                rows = by_h[H] = (np.ascontiguousarray(self.buildings[left][0]._cached(H)[4][fl, 1:]),
+                                  np.ascontiguousarray(self.buildings[right][0]._cached(H)[4][fr, 1:]))
+            ends = []
+            for b in (left, right):
+                state = states.get(b)
+                if state is None:
+                    state = states[b] = self._linear_state(b, y)
+                free = state[3].get(H)
+                if free is None:
+                    bound = self.buildings[b][0]
+                    cached = bound._cached(H)
+                    modal = state[1]
+                    Q = cached[1] * modal[0]
+                    Q += cached[2] * modal[1]
+                    free = bound.phi @ Q
+                    if len(state[3]) > 8:       # a few horizons per state
+                        state[3].clear()
+                    state[3][H] = free
+                ends.append(free)
+            # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its
+            # ends + L dS / 2; forced part at its end (as horizons)
+            delta = ends[0][fl] - ends[1][fr]
+            delta -= gap
+            upper = answer[:, 1:-1]
+            np.add(delta[:, :-1], delta[:, 1:], out=upper)
+            upper *= 0.5
+            rate = states[left][2][fl] + states[right][2][fr]
+            upper += (0.5 * rate * dS)[:, None]
+            for b, floors, ground_rows in ((left, fl, rows[0]), (right, fr, rows[1])):
+                force = forces.get(b)
+                if force is not None and force.any():
+                    # a held force: FloorMotion's forced bound on every floor, then the levels' floors
+                    bound = self.buildings[b][0]
+                    cached = bound._cached(H)
+                    forced = cached[4] * ground + (bound.abs_phi * np.abs(bound.phi.T @ force)) @ cached[3]
+                    upper += forced[floors, 1:]
+                else:
+                    upper += ground_rows * tail
+            answer[:, 0] = delta[:, 0]
+            np.greater_equal(answer, 0.0, out=bad)
+            for pos, f in zip(positions, bad.argmax(axis=1).tolist()):
+                if f:                           # f = 0: closed now (0 s)
+                    out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
         return out
 
     def _through_yielding(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, prove_linear,

@@ -1,0 +1,64 @@
+"""OpenGaps' proof for linear buildings (:meth:`OpenGaps._linear_horizons`) answers bit for bit as
+the general proof does (:meth:`OpenGaps.horizons` through :class:`FloorMotion`), which
+``tests/test_gap_bound.py`` checks against the motion itself.
+
+The fast proof keeps each building's modal state and free motion per horizon across calls,
+gathers only the levels' floors from them, and finds every answer
+with one comparison and one ``argmax``: none of that may change a horizon by one bit.  Random
+pairs of buildings (1 to 15 storeys, Rayleigh or modal damping), levels on any floors and
+subsets of them, states from closed to wide open, held forces, repeated states and horizons.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cosim.master.gap_bound import ModalBound, OpenGaps, constant_bound, running_max_abs
+from fmu_src.shear_building import ShearBuilding
+
+
+def building(rng, n):
+    """A random shear building (masses kg, relative stiffnesses), Rayleigh or modal damping."""
+    masses = list(rng.uniform(0.5, 2.0, n) * 1e5)
+    stiffnesses = list(rng.uniform(0.5, 2.0, n))
+    damping = "modal" if rng.random() < 0.5 else "rayleigh"
+    return ShearBuilding.from_period(float(rng.uniform(0.2, 1.5)), masses, stiffnesses, 0.05, damping)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_linear_proof_answers_as_the_general_one_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    nl, nr = int(rng.integers(1, 16)), int(rng.integers(1, 16))
+    bl, br = building(rng, nl), building(rng, nr)
+    ix_l, iv_l = np.arange(nl), nl + np.arange(nl)
+    ix_r, iv_r = 2 * nl + np.arange(nr), 2 * nl + nr + np.arange(nr)
+    buildings = {"left": (ModalBound(bl), ix_l, iv_l), "right": (ModalBound(br), ix_r, iv_r)}
+    m = min(nl, nr)
+    floors = rng.choice(m, size=int(rng.integers(1, m + 1)), replace=False)
+    levels = [("left", int(f), "right", int(f), float(rng.uniform(0.01, 0.05))) for f in floors]
+    fast = OpenGaps(buildings, levels)
+    general = OpenGaps(buildings, levels)
+    general._all_linear = False                 # the general proof (FloorMotion per building)
+    assert fast._all_linear
+    knots = np.linspace(-0.1, 1.0, 60)
+    values = rng.normal(0.0, 3.0, knots.size)
+    states = [np.concatenate((rng.normal(0, s, nl), rng.normal(0, 10 * s, nl),
+                              rng.normal(0, s, nr), rng.normal(0, 10 * s, nr))) for s in (0.002, 0.01, 0.03)]
+    kinds = set()
+    for k in range(60):
+        y = states[int(rng.integers(len(states)))]     # states repeat: kept ones must answer alike
+        H = float(rng.choice([0.01, 0.05, 0.33, 0.17 + 1e-15]))
+        ground = running_max_abs(knots, values, 0.0, H) if k % 3 else constant_bound(0.0)
+        forces = None
+        if k % 4 == 1:
+            forces = {"left": np.where(np.arange(nl) == floors[0], -2e5 * rng.random(), 0.0),
+                      "right": np.where(np.arange(nr) == floors[0], 2e5 * rng.random(), 0.0)}
+        which = None if k % 5 else sorted(rng.choice(len(levels), size=int(rng.integers(1, len(levels) + 1)),
+                                                     replace=False).tolist())
+        got = fast.horizons(y, H, ground, forces, which)
+        want = general.horizons(y, H, ground, forces, which)
+        assert got == want, (k, H, which)
+        assert got == OpenGaps(buildings, levels).horizons(y, H, ground, forces, which)   # nothing kept
+        kinds.update("closed" if s == 0.0 else "open" if s == H else "short" for s in got)
+    # the sequence meets every kind of answer, so a wrong one would show
+    assert {"open", "short"} <= kinds
