@@ -372,6 +372,141 @@ class FloorMotion:
         return bound.drift_phi @ self.Q, forced, bound.abs_drift_phi @ self.speed
 
 
+def _as_slice(index: np.ndarray):
+    """``index`` (ints) as a slice where it is evenly spaced and increasing (a view, no copy),
+    else itself."""
+    if index.size == 1:
+        return slice(int(index[0]), int(index[0]) + 1)
+    step = int(index[1] - index[0])
+    if step > 0 and np.array_equal(np.diff(index), np.full(index.size - 1, step)):
+        return slice(int(index[0]), int(index[-1]) + 1, step)
+    return index
+
+
+class _LinearPair:
+    """The levels between two linear buildings, proven as :meth:`OpenGaps.horizons` does with
+    fewer numpy calls (each ~1 us: their count is a proof's cost), bit for bit:
+
+    * both buildings' floors read in one gather, their modal state (:meth:`ModalBound.modal_state`)
+      computed into one stacked vector (the products per building, written in place; the
+      elementwise parts once for both), kept while the reads are the same (a step proves its
+      gaps over a few horizons from one state);
+    * the free motion ``Q = Ac q + As (q' + zeta w q)`` of both buildings in one product of the
+      stacked tables (per horizon), every floor's ``phi @ Q`` per building (OpenBLAS computes a
+      product's rows alike only for some row counts: ``phi[fl] @ Q`` may differ from ``(phi @
+      Q)[fl]`` in the last bits), kept per state and horizon; the levels' floors gathered at once;
+    * the ground's forced bound of the levels' floors only (an elementwise product), stacked;
+    * per level ``delta(0)``, the grid intervals' upper bounds and a sentinel ``1`` in one row:
+      one comparison and one ``argmax`` say whether the gap is closed now, the first interval
+      that may close, or none."""
+
+    def __init__(self, gaps: "OpenGaps", left: str, right: str, positions: list, fl: np.ndarray,
+                 fr: np.ndarray, gap: np.ndarray):
+        self.left, self.right, self.positions, self.fl, self.fr, self.gap = left, right, positions, fl, fr, gap
+        self.bounds = (gaps.buildings[left][0], gaps.buildings[right][0])
+        bl, br = self.bounds
+        self.nl, n = bl.n, bl.n + br.n
+        self.reads = np.concatenate((gaps._reads[left], gaps._reads[right]))
+        self.w = np.concatenate((bl.w, br.w))
+        self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
+        self.q, self.qd, self.rate = np.empty(n), np.empty(n), np.empty(n)
+        m = fl.size
+        self.m = m
+        # the levels' floors in the stacked rows: views where they are evenly spaced (no copy)
+        self.rows_l, self.rows_r = _as_slice(fl), _as_slice(bl.n + fr)
+        self.answer = np.empty((m, GRID + 2))
+        self.answer[:, -1] = 1.0
+        self.bad = np.empty((m, GRID + 2), dtype=bool)
+        self._by_h: dict = {}           # H -> (stacked Ac, stacked As, stacked ground rows of the levels)
+        self._key = None                # the reads (bytes) of the state below
+        self._modal = None              # (q, q' + zeta w q) as stacked columns
+        self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
+
+    def _tables(self, H: float) -> tuple:
+        tables = self._by_h.get(H)
+        if tables is None:
+            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = (b._cached(H) for b in self.bounds)
+            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
+                                      np.vstack((cl[4][self.fl, 1:], cr[4][self.fr, 1:])))
+        return tables
+
+    def _state(self, y: np.ndarray) -> None:
+        """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
+        free rate bound (``|phi| @ speed``, as :class:`FloorMotion`), if the reads changed."""
+        reads = y[self.reads]
+        key = reads.tobytes()
+        if key == self._key:
+            return
+        (bl, br), nl = self.bounds, self.nl
+        q, qd = self.q, self.qd
+        nr2 = 2 * nl
+        np.matmul(bl.to_modal, reads[:nl], out=q[:nl])
+        np.matmul(bl.to_modal, reads[nl:nr2], out=qd[:nl])
+        nb = br.n
+        np.matmul(br.to_modal, reads[nr2:nr2 + nb], out=q[nl:])
+        np.matmul(br.to_modal, reads[nr2 + nb:], out=qd[nl:])
+        b = self.zeta_w * q
+        b += qd
+        speed = self.w * q
+        speed **= 2
+        speed += qd * qd
+        np.sqrt(speed, out=speed)
+        np.matmul(bl.abs_phi, speed[:nl], out=self.rate[:nl])
+        np.matmul(br.abs_phi, speed[nl:], out=self.rate[nl:])
+        self._modal = (q[:, None], b[:, None])
+        self._key = key
+        self._free = {}
+
+    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, out: list) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+        self._state(y)
+        Ac, As, ground_rows = self._tables(H)
+        free = self._free.get(H)
+        if free is None:
+            q, b = self._modal
+            Q = Ac * q
+            Q += As * b
+            (bl, br), nl = self.bounds, self.nl
+            free = np.empty(Q.shape)
+            np.matmul(bl.phi, Q[:nl], out=free[:nl])
+            np.matmul(br.phi, Q[nl:], out=free[nl:])
+            if len(self._free) > 8:         # a few horizons per state
+                self._free.clear()
+            self._free[H] = free
+        dS = H / GRID
+        m = self.m
+        rows_l, rows_r = self.rows_l, self.rows_r
+        # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its ends
+        # + L dS / 2; forced part at its end (as horizons)
+        delta = free[rows_l] - free[rows_r]
+        delta -= self.gap
+        answer = self.answer
+        upper = answer[:, 1:-1]
+        np.add(delta[:, :-1], delta[:, 1:], out=upper)
+        upper *= 0.5
+        rate = self.rate[rows_l] + self.rate[rows_r]
+        upper += (0.5 * rate * dS)[:, None]
+        # the forced bound of the levels' floors: FloorMotion's ground term (an elementwise
+        # product: the levels' rows alone) plus, with a held force, its modal term (a matrix
+        # product: every floor's, then the levels')
+        forced = ground_rows * ground[1:]
+        if forces:
+            for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced[:m]),
+                                              (self.right, self.bounds[1], self.fr, forced[m:])):
+                force = forces.get(name)
+                if force is not None and force.any():
+                    part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
+        upper += forced[:m]
+        upper += forced[m:]
+        answer[:, 0] = delta[:, 0]
+        np.greater_equal(answer, 0.0, out=self.bad)
+        for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
+            if f:                               # f = 0: closed now (0 s)
+                out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
+
+
 def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
                  gap: float, H: float) -> float:
     """Longest ``s <= H`` (s) over which ``delta = u_left - u_right - gap`` provably stays < 0,
@@ -518,8 +653,6 @@ class OpenGaps:
         # every building linear (no elastic range, no bound through yielding): the proof is
         # :meth:`_linear_horizons`, with the per-building and per-pair work it caches below
         self._all_linear = not self.elastic and not self.yielded
-        # building -> (its reads as bytes, modal state, its floors' rate bound, horizon -> Q)
-        self._linear_states: dict = {}
         # which levels (None: all) -> per pair, what the linear proof reuses (:meth:`_linear_plan`)
         self._plans: dict = {}
 
@@ -691,105 +824,27 @@ class OpenGaps:
 
     # -- linear buildings: the same arithmetic as :meth:`horizons`' linear proof, in fewer calls ----
     def _linear_plan(self, which: Sequence[int] | None) -> list:
-        """Per pair of :meth:`_pairs`: ``[left, right, positions, fl, fr, gap, answer buffer,
-        comparison buffer, horizon -> (ground rows of the left floors, of the right floors)]``.
-
-        The free motion stays ``(phi @ Q)[fl]``, not ``phi[fl] @ Q``: OpenBLAS computes a
-        product's rows alike only for some row counts (a single row differs in its last bits),
-        so only every floor's product gives the general proof's numbers.  The answer
-        buffer holds, per level, ``delta(0)`` then the grid intervals' upper bounds then a
-        sentinel ``1``: one comparison and one ``argmax`` find whether the gap is closed now,
-        the first interval that may close and whether none does."""
+        """Per pair of :meth:`_pairs`, a :class:`_LinearPair` (kept per grouping, as :meth:`_pairs`)."""
         key = None if which is None else tuple(which)
         plan = self._plans.get(key)
         if plan is not None:
             return plan
-        plan = []
-        for left, right, positions, fl, fr, gap in self._pairs(which):
-            answer = np.empty((fl.size, GRID + 2))
-            answer[:, -1] = 1.0
-            plan.append([left, right, positions, fl, fr, gap,
-                         answer, np.empty((fl.size, GRID + 2), dtype=bool), {}])
+        plan = [_LinearPair(self, *pair) for pair in self._pairs(which)]
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
 
-    def _linear_state(self, b: str, y: np.ndarray) -> list:
-        """Building ``b``'s ``[reads as bytes, modal state, every floor's free rate bound, horizon
-        -> every floor's free motion]`` (:meth:`ModalBound.modal_state`, ``|phi| @ speed`` as :class:`FloorMotion`
-        computes it), kept while its floors' state is the same."""
-        reads = y[self._reads[b]]
-        key = reads.tobytes()
-        known = self._linear_states.get(b)
-        if known is not None and known[0] == key:
-            return known
-        bound = self.buildings[b][0]
-        n = bound.n
-        modal = bound.modal_state(reads[:n], reads[n:])
-        state = self._linear_states[b] = [key, modal, bound.abs_phi @ modal[2], {}]
-        return state
-
     def _linear_horizons(self, y: np.ndarray, H: float, ground, forces: dict,
                          which: Sequence[int] | None) -> list[float]:
-        """:meth:`horizons` when every building is linear: per building, the floors' free motion
-        (kept per state and horizon); per pair, the levels' floors only, with the same
-        operations in the same order as :meth:`horizons` (and :class:`FloorMotion`), so the
-        same horizons to the last bit."""
+        """:meth:`horizons` when every building is linear (:class:`_LinearPair`): the same
+        operations in the same order as :meth:`horizons` and :class:`FloorMotion`, so the same
+        horizons to the last bit."""
         plan = self._linear_plan(which)
-        out = [0.0] * sum(len(p[2]) for p in plan)
-        dS = H / GRID
+        out = [0.0] * sum(len(p.positions) for p in plan)
         if callable(ground):
             ground = ground()
-        tail = ground[1:]
-        states = {}
-        for left, right, positions, fl, fr, gap, answer, bad, by_h in plan:
-            rows = by_h.get(H)
-            if rows is None:
-                if len(by_h) > 64:            # a bounded number of distinct step lengths
-                    by_h.pop(next(iter(by_h)))
-                rows = by_h[H] = (np.ascontiguousarray(self.buildings[left][0]._cached(H)[4][fl, 1:]),
-                                  np.ascontiguousarray(self.buildings[right][0]._cached(H)[4][fr, 1:]))
-            ends = []
-            for b in (left, right):
-                state = states.get(b)
-                if state is None:
-                    state = states[b] = self._linear_state(b, y)
-                free = state[3].get(H)
-                if free is None:
-                    bound = self.buildings[b][0]
-                    cached = bound._cached(H)
-                    modal = state[1]
-                    Q = cached[1] * modal[0]
-                    Q += cached[2] * modal[1]
-                    free = bound.phi @ Q
-                    if len(state[3]) > 8:       # a few horizons per state
-                        state[3].clear()
-                    state[3][H] = free
-                ends.append(free)
-            # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its
-            # ends + L dS / 2; forced part at its end (as horizons)
-            delta = ends[0][fl] - ends[1][fr]
-            delta -= gap
-            upper = answer[:, 1:-1]
-            np.add(delta[:, :-1], delta[:, 1:], out=upper)
-            upper *= 0.5
-            rate = states[left][2][fl] + states[right][2][fr]
-            upper += (0.5 * rate * dS)[:, None]
-            for b, floors, ground_rows in ((left, fl, rows[0]), (right, fr, rows[1])):
-                force = forces.get(b)
-                if force is not None and force.any():
-                    # a held force: FloorMotion's forced bound on every floor, then the levels' floors
-                    bound = self.buildings[b][0]
-                    cached = bound._cached(H)
-                    forced = cached[4] * ground + (bound.abs_phi * np.abs(bound.phi.T @ force)) @ cached[3]
-                    upper += forced[floors, 1:]
-                else:
-                    upper += ground_rows * tail
-            answer[:, 0] = delta[:, 0]
-            np.greater_equal(answer, 0.0, out=bad)
-            for pos, f in zip(positions, bad.argmax(axis=1).tolist()):
-                if f:                           # f = 0: closed now (0 s)
-                    out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
+        for pair in plan:
+            pair.prove(y, H, ground, forces, out)
         return out
 
     def _through_yielding(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, prove_linear,
