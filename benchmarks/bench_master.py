@@ -8,7 +8,9 @@ per communication step and the FMI calls.  ``--profile`` also profiles one more 
 scene and prints the time spent in ``cosim/`` itself (own time of its functions: the
 master's bookkeeping; the FMUs' Python and the FMI calls excluded), in total and per step
 (cProfile inflates Python-heavy code, so this over-estimates the master's share: compare
-trees with it, not with the wall times).
+trees with it, not with the wall times).  ``--proofs`` also times, in one more run, every
+proof that gaps stay open (``OpenGaps.horizons``, the ground bound it evaluates included):
+their number and the microseconds per proof.
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ def main(argv=None) -> int:
     parser.add_argument("--fmu-dir", type=Path)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--profile", action="store_true", help="profile every scene: the master's own time per step")
+    parser.add_argument("--proofs", action="store_true", help="time every proof that gaps stay open (OpenGaps.horizons)")
     args = parser.parse_args(argv)
     if args.fmu_dir is None:
         from cosim.fmus import default_fmu_dir
@@ -62,7 +65,34 @@ def main(argv=None) -> int:
                     master = sum(v[2] for k, v in stats.stats.items() if "/cosim/" in k[0])
                     print(f"  profile of {name}: {total:.3f} s in total, {master:.3f} s "
                           f"({100 * master / total:.0f} %, {1e6 * master / n:.0f} us/step) in cosim/ itself (own time)")
+                if args.proofs:
+                    calls, seconds = proof_times(system)
+                    if calls:
+                        print(f"  proofs of {name}: {calls} calls, {seconds:.4f} s, {1e6 * seconds / calls:.1f} us/proof")
     return 0
+
+
+def proof_times(system) -> tuple[int, float]:
+    """``(calls, seconds)`` of ``OpenGaps.horizons`` over one more run of ``system`` (the class's
+    method wrapped for that run only)."""
+    from cosim.master.gap_bound import OpenGaps
+
+    original = OpenGaps.horizons
+    spent = [0, 0.0]
+
+    def timed(self, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return original(self, *args, **kwargs)
+        finally:
+            spent[0] += 1
+            spent[1] += time.perf_counter() - t0
+    OpenGaps.horizons = timed
+    try:
+        simulate(system, progress=False)
+    finally:
+        OpenGaps.horizons = original
+    return spent[0], spent[1]
 
 
 if __name__ == "__main__":
