@@ -64,7 +64,7 @@ from scipy.optimize import brentq
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
 from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
-                              canonical_length, first_root, hermite_range_scalar, max_abs)
+                              canonical_length, first_root, hermite_range, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -128,6 +128,10 @@ class BuildingState:
     # bilinear: the floor forces of the storeys' constant parts D' r (N), a cache of (mode, slip)
     # cleared at every event (r does not depend on the slip of a yielding storey)
     offset: np.ndarray | None = None
+    # yielding storeys (bilinear, Bouc-Wen): the running peak of |V[i]| (N) inside the steps
+    # (:meth:`ExactPiecewiseLinear._track_shear`, :meth:`BoucWenRK.advance`); None for linear
+    # storeys, whose peak shear is k times the peak drift
+    peak_shear: np.ndarray | None = None
     # segments in which a peak may exceed ``peaks``, searched when the peaks are read
     # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
     pending: list = field(default_factory=list)
@@ -343,6 +347,8 @@ class BuildingIntegrator:
                               peaks=np.zeros(3 * n))
         f = np.zeros(n) if force is None else np.asarray(force, float)
         state.peaks = np.concatenate([np.abs(u0), np.abs(d0), np.abs(self.absolute_acceleration(state, f))])
+        if self._inelastic:
+            state.peak_shear = np.abs(self.storey_shear(state))
         return state
 
     def advance(self, state: BuildingState, times, ag, force) -> StepCost:
@@ -570,6 +576,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         e_damp = e_in = 0.0
         flagged = []
         peaks = state.peaks
+        drift_reach = np.empty((count, n)) if inelastic else None
         for js in groups.values():
             smap = maps[js[0]]
             _, tier1, change, forms, _ = self._batch_plan(smap)
@@ -581,6 +588,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # and the modal amplitudes of z'(0)
             out = Yg @ tier1.T
             bound = np.abs(out[:, 4 * n:]) @ change   # |Re|, |Im| of W z'(0) and |ag slope|
+            if inelastic:
+                drift_reach[js] = bound[:, n:two_n]     # for the storey shears' peaks (_track_shear_rows)
             if inelastic:
                 # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
                 if yielding:
@@ -618,6 +627,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
         state.E_damping += e_damp
         state.E_input += e_in
+        if inelastic:
+            self._track_shear_rows(state, cfg, Y, z, positive, drift_reach)
         u1 = z[:n]                  # views of a fresh product: nothing else writes to it
         state.E_external += float(force @ (u1 - state.u))
         if yielding:
@@ -827,6 +838,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     quiet = True
                 if quiet and not peak_flags.any():
                     cost.cleared += 1
+                    if inelastic:
+                        self._track_shear(state, cfg, y, z1, rem, drift_reach=bound[n:2 * n])
                     self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
@@ -845,6 +858,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if e_damp is None:
                     e_damp, e_in = segment.energies(w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
+                if inelastic:
+                    self._track_shear(state, cfg, y, z1, stop, scan=scan, segment=segment)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
             if event is not None:
@@ -899,6 +914,85 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         g1 = g0 + mode * scan_vector[4 * m + n:4 * m + 2 * n] * length - bound[n:] * half
         unload_flags &= np.minimum(g0, g1) <= 1e-12 * np.abs(g0)
         return not (up_flags.any() or down_flags.any() or unload_flags.any())
+
+    def _storey_shear_at(self, state, d):
+        """``V`` of drifts ``d`` (any shape ending in n) in the state's yield pattern: a yielding
+        storey ``alpha k d + (1 - alpha) Fy mode``, an elastic one ``k d - (1 - alpha) k s``."""
+        _, yielding, any_yielding, q_yield, _, _ = self._law_facts(state.mode)
+        elastic_part = self._elastic_k * (d - state.slip)
+        q = np.where(yielding, q_yield, elastic_part) if any_yielding else elastic_part
+        return self._hard_k * d + q
+
+    def _track_shear(self, state, cfg, y, z1, length, scan=None, drift_reach=None, segment=None):
+        """Raise ``state.peak_shear`` over a segment of ``length`` s from ``y`` (``[u0; v0; ag;
+        ag'; p]``) to ``z1`` (``[u; v]``) in the state's yield pattern (before its events apply).
+
+        Between events a storey's shear is linear in its drift: yielding, ``alpha k d + const``
+        with the drift monotonic (unloading is an event); elastic, ``k d - (1 - alpha) k s``
+        with the slip fixed.  So a yielding storey's peak is at a segment end, and an elastic
+        storey's at an end or at an interior extremum of its drift: where a rigorous bound of
+        ``|V|`` over the segment (``drift_reach``, tier 1's bound of the drift's change, or the
+        cubic Hermite bound of ``scan``'s drift rows) exceeds the peak, the exact solution is
+        searched (:func:`max_abs` on ``c' z + offset``).  The start was counted by the segment
+        before (or the initial state)."""
+        n = self.n
+        d1 = _drift(z1[:n])
+        peak = np.maximum(state.peak_shear, np.abs(self._storey_shear_at(state, d1)))
+        elastic = state.mode == 0
+        if elastic.any():
+            shift = self._elastic_k * state.slip            # V = k d - shift (elastic storeys)
+            if drift_reach is not None:
+                reach = np.abs(self.k * _drift(y[:n]) - shift) + self.k * drift_reach
+            else:
+                G, B = scan.G[n:2 * n], scan.B[n:2 * n, 0]
+                lo, hi = hermite_range(G[:, 0], G[:, 1], length * G[:, 2], length * G[:, 3])
+                err = B * (length ** 4 / 384.0)
+                reach = np.maximum(np.abs(self.k * (lo - err) - shift), np.abs(self.k * (hi + err) - shift))
+            candidates = (elastic & (reach > peak)).nonzero()[0].tolist()
+            if candidates:
+                if segment is None:
+                    segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], length)
+                xtol = EVENT_XTOL * length
+                for i in candidates:
+                    k = float(self.k[i])
+                    peak[i], _ = max_abs(segment, k * cfg.peak_modal[n + i], -float(shift[i]), length,
+                                         float(peak[i]), PEAK_XTOL * length, min_width=xtol,
+                                         budget=_ROOT_BUDGET, atol=k * PEAK_ATOL[1])
+        state.peak_shear = peak
+
+    def _track_shear_rows(self, state, cfg, Y, z_end, lengths, drift_reach):
+        """:meth:`_track_shear` over consecutive intervals in one yield pattern (the batch path):
+        ``Y`` their ``y`` rows, ``z_end`` the last one's end, ``lengths`` (s) and
+        ``drift_reach`` (tier 1's bound of each drift's change, rows) theirs.  An interval
+        whose bound stays under the step's largest end value cannot hold the step's peak."""
+        n = self.n
+        count = Y.shape[0]
+        U = np.empty((count + 1, n))
+        U[:count] = Y[:, :n]
+        U[count] = z_end[:n]
+        d = U.copy()
+        d[:, 1:] -= U[:, :n - 1]
+        V = np.abs(self._storey_shear_at(state, d))
+        peak = np.maximum(state.peak_shear, V[1:].max(axis=0))
+        elastic = state.mode == 0
+        if elastic.any():
+            shift = self._elastic_k * state.slip
+            reach = np.abs(self.k * d[:count] - shift) + self.k * drift_reach
+            rows, storeys = ((reach > peak) & elastic).nonzero()
+            segments = {}
+            for j, i in zip(rows.tolist(), storeys.tolist()):
+                if not reach[j, i] > peak[i]:
+                    continue                          # a peak found in an earlier interval covers it
+                y = Y[j]
+                L = float(lengths[j])
+                segment = segments.get(j)
+                if segment is None:
+                    segment = segments[j] = TaylorSegment(cfg, y[:2 * n], y[2 * n:], L)
+                k = float(self.k[i])
+                peak[i], _ = max_abs(segment, k * cfg.peak_modal[n + i], -float(shift[i]), L, float(peak[i]),
+                                     PEAK_XTOL * L, min_width=EVENT_XTOL * L, budget=_ROOT_BUDGET,
+                                     atol=k * PEAK_ATOL[1])
+        state.peak_shear = peak
 
     def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
         """End a segment at ``z1`` (a fresh array: the state keeps views of it).  ``yielding``
@@ -1332,7 +1426,7 @@ class BoucWenRK(BuildingIntegrator):
         return fun
 
     def _peak_values(self, y, dy_dt, force):
-        """Values and time derivatives of the tracked functions (x, drift, a) at one point."""
+        """Values and time derivatives of the tracked functions (x, drift, a, V) at one point."""
         n = self.n
         u, v, z = y[:n], y[n:2 * n], y[2 * n:3 * n]
         acc_rel, zdot = dy_dt[n:2 * n], dy_dt[2 * n:3 * n]
@@ -1341,7 +1435,7 @@ class BoucWenRK(BuildingIntegrator):
         Vdot = self.alpha * self.k * dd + (1.0 - self.alpha) * self.fy * zdot
         a = (force - self.C @ v - _floor_forces(V)) / self.masses
         adot = (-self.C @ acc_rel - _floor_forces(Vdot)) / self.masses
-        return np.concatenate([u, d, a]), np.concatenate([v, dd, adot])
+        return np.concatenate([u, d, a, V]), np.concatenate([v, dd, adot, Vdot])
 
     def advance(self, state, times, ag, force) -> StepCost:
         times = np.asarray(times, dtype=float)
@@ -1357,7 +1451,8 @@ class BoucWenRK(BuildingIntegrator):
                              f"{BOUC_WEN_MAX_SPAN / (2.0 * math.pi):.0f} periods): use shorter steps")
         u_start = state.u.copy()
         y = np.concatenate([state.u, state.v, state.z, [0.0, 0.0, 0.0]])
-        peaks = state.peaks.copy()
+        # the running peaks of x, drift, a and the storey shear V, located alike
+        peaks = np.concatenate((state.peaks, state.peak_shear))
         for j in range(times.size - 1):
             length = float(times[j + 1] - times[j])
             if length <= 0.0:
@@ -1406,7 +1501,8 @@ class BoucWenRK(BuildingIntegrator):
         state.E_input += float(y[3 * n + 1])
         state.E_hysteretic += float(y[3 * n + 2])
         state.E_external += float(force @ (y[:n] - u_start))
-        state.peaks = peaks
+        state.peaks = peaks[:3 * n]
+        state.peak_shear = peaks[3 * n:]
         return cost
 
 

@@ -29,7 +29,10 @@ a step over several record intervals of one length in one product, a step of one
 interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen
 by an embedded Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
-``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
+``mu``, ``drift_ratio_peak``) are located inside every step; ``V_peak`` (storey shear) is ``k
+drift_peak`` for linear storeys, exact at every event and record-interval end and at the drift's
+cubic Hermite extremum between them for bilinear ones (``ExactPiecewiseLinear._track_shear``),
+located on the dense output for Bouc-Wen.  Energies ``E_input``,
 ``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
 ``E_strain`` (the elastic part) are instantaneous, so that ``E_input + E_external + E0 =
 E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kinetic + strain energy.
@@ -72,7 +75,7 @@ _KNOT_TIME_TOL = 1e-9
 # them: default_inelastic ran 239 searches with V read at every step, 32 without).
 # drift_residual is published at every step instead: the master reads it at every step to prove
 # a gap open for a yielding building (cosim/master/gap_bound.py).
-_DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
+_DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu", "V_peak")
 
 
 class Building(Fmi2Slave):
@@ -134,6 +137,10 @@ class Building(Fmi2Slave):
                description="peak |drift[i]| so far, located inside the steps"),
         *array("a_peak", N_MAX, causality="output", unit="m/s2",
                description="peak |a[i]| so far (the building's own, with the held force), located inside the steps"),
+        *array("V_peak", N_MAX, causality="output", unit="N",
+               description="peak |V[i]| so far, inside the steps (linear: k[i] drift_peak[i]; bilinear: at "
+                           "every event and record interval end, and at drift extrema between them; "
+                           "bouc_wen: located on the Runge-Kutta steps)"),
         *array("drift_ratio_peak", N_MAX, causality="output", unit="1",
                description="drift_peak[i] / storey_height[i]"),
         *array("mu", N_MAX, causality="output", unit="1",
@@ -225,6 +232,10 @@ class Building(Fmi2Slave):
             block[1:4, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
             np.divide(state.peak_drift, self.storey_height[:n], out=block[4, :n])
             np.multiply(state.peak_drift, self._inv_yield_drift, out=block[5, :n])
+            if state.peak_shear is None:     # linear storeys: V = k drift, exactly
+                np.multiply(state.peak_drift, self._building.stiffnesses, out=block[6, :n])
+            else:
+                block[6, :n] = state.peak_shear
             self._derived_cache = self._derived_rows
         return self._derived_cache
 
