@@ -21,7 +21,9 @@ Two integrators, one per kind of law, registered in ``INTEGRATORS``:
 
 Both track the energy terms (``E_input``, ``E_external``, ``E_damping``, ``E_hysteretic``) and
 the running peaks of ``|x[i]|``, ``|drift[i]|`` and the absolute floor acceleration ``|a[i]|``
-inside the step, not only at its end.  The exact integrator works in three tiers, so that a
+inside the step, not only at its end, and for yielding storeys that of the storey shear
+``|V[i]|`` (:meth:`ExactPiecewiseLinear._track_shear`; a linear storey's is ``k`` times its
+peak drift).  The exact integrator works in three tiers, so that a
 step where nothing happens costs a few vector operations:
 
 1. a bound on how far every watched function can move in the segment (precomputed per

@@ -30,9 +30,8 @@ interval in one product with a matrix cached per length, like the zero-order hol
 by an embedded Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
 ``mu``, ``drift_ratio_peak``) are located inside every step; ``V_peak`` (storey shear) is ``k
-drift_peak`` for linear storeys, exact at every event and record-interval end and at the drift's
-cubic Hermite extremum between them for bilinear ones (``ExactPiecewiseLinear._track_shear``),
-located on the dense output for Bouc-Wen.  Energies ``E_input``,
+drift_peak`` for linear storeys and located alike for yielding ones
+(``ExactPiecewiseLinear._track_shear``, ``BoucWenRK.advance``).  Energies ``E_input``,
 ``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
 ``E_strain`` (the elastic part) are instantaneous, so that ``E_input + E_external + E0 =
 E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kinetic + strain energy.
@@ -138,9 +137,7 @@ class Building(Fmi2Slave):
         *array("a_peak", N_MAX, causality="output", unit="m/s2",
                description="peak |a[i]| so far (the building's own, with the held force), located inside the steps"),
         *array("V_peak", N_MAX, causality="output", unit="N",
-               description="peak |V[i]| so far, inside the steps (linear: k[i] drift_peak[i]; bilinear: at "
-                           "every event and record interval end, and at drift extrema between them; "
-                           "bouc_wen: located on the Runge-Kutta steps)"),
+               description="peak |V[i]| so far, located inside the steps (linear: k[i] drift_peak[i])"),
         *array("drift_ratio_peak", N_MAX, causality="output", unit="1",
                description="drift_peak[i] / storey_height[i]"),
         *array("mu", N_MAX, causality="output", unit="1",
