@@ -66,7 +66,7 @@ from scipy.optimize import brentq
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
 from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
-                              canonical_length, first_root, hermite_range, hermite_range_scalar, max_abs)
+                              canonical_length, first_root, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -134,6 +134,9 @@ class BuildingState:
     # (:meth:`ExactPiecewiseLinear._track_shear`, :meth:`BoucWenRK.advance`); None for linear
     # storeys, whose peak shear is k times the peak drift
     peak_shear: np.ndarray | None = None
+    # bilinear: which storeys have yielded so far (a storey that has not has V = k d, and its peak
+    # shear is k times its peak drift, below Fy, the shear at its first yield)
+    yielded: np.ndarray | None = None
     # segments in which a peak may exceed ``peaks``, searched when the peaks are read
     # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
     pending: list = field(default_factory=list)
@@ -351,7 +354,19 @@ class BuildingIntegrator:
         state.peaks = np.concatenate([np.abs(u0), np.abs(d0), np.abs(self.absolute_acceleration(state, f))])
         if self._inelastic:
             state.peak_shear = np.abs(self.storey_shear(state))
+            if self.hysteresis.model == "bilinear":
+                state.yielded = np.zeros(n, dtype=bool)
         return state
+
+    def peak_storey_shear(self, state: BuildingState) -> np.ndarray | None:
+        """The running peak of every storey's ``|V|`` (N), the deferred peak searches run first
+        (:meth:`resolve_peaks`); None for linear storeys (``k`` times the peak drift)."""
+        if state.peak_shear is None:
+            return None
+        if state.yielded is None:
+            return state.peak_shear
+        self.resolve_peaks(state)
+        return np.where(state.yielded, state.peak_shear, self.k * state.peak_drift)
 
     def advance(self, state: BuildingState, times, ag, force) -> StepCost:
         raise NotImplementedError
@@ -382,6 +397,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._hard_k = self.alpha * self.k                  # the hardening spring
         self._law_memo = None
         self._shear_memo = None
+        self._cover_memo = None
+        self._yield_q = (1.0 - self.alpha) * self.fy       # the plastic element's strength (N)
+        # the same as Python floats (_track_shear)
+        self._k_list, self._hard_list = self.k.tolist(), self._hard_k.tolist()
+        self._soft_list, self._qy_list = self._elastic_k.tolist(), self._yield_q.tolist()
         limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
         self._second_order_limits = (limit, -limit)
         # a linear building's one-interval step matrices by canonical length, and by every
@@ -579,6 +599,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         flagged = []
         peaks = state.peaks
         drift_reach = np.empty((count, n)) if inelastic else None
+        drift_need = np.empty((count, n), dtype=bool) if inelastic else None
+        drift_flagged = False
         for js in groups.values():
             smap = maps[js[0]]
             _, tier1, change, forms, _ = self._batch_plan(smap)
@@ -609,6 +631,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # function cleared here cannot pass the peaks anywhere in the interval (tier 1 is
             # rigorous), so only the others are tested in _peaks
             need = np.abs(out[:, :3 * n]) + bound[:, :3 * n] > peaks
+            if inelastic:
+                drift_need[js] = need[:, n:two_n]
+                drift_flagged = drift_flagged or bool(drift_need[js].any())
             if need.any():
                 rows = need.any(axis=1).nonzero()[0].tolist()
                 scans = Yg[rows] @ smap.scan.T           # the Scan vectors of those intervals only
@@ -629,8 +654,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
         state.E_damping += e_damp
         state.E_input += e_in
+        # a covered storey whose |drift| tier 1 kept under its peak in an interval cannot pass its
+        # own peak shear there
         if inelastic:
-            self._track_shear_rows(state, cfg, Y, z, positive, drift_reach)
+            covered, mask = self._shear_covered(state)
+            if not covered or drift_flagged:
+                drift_need[:, ~mask] = True
+                self._track_shear_rows(state, cfg, Y, z, positive, drift_reach, drift_need)
         u1 = z[:n]                  # views of a fresh product: nothing else writes to it
         state.E_external += float(force @ (u1 - state.u))
         if yielding:
@@ -840,8 +870,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     quiet = True
                 if quiet and not peak_flags.any():
                     cost.cleared += 1
+                    # tier 1 kept every |drift| under its peak: a covered storey's shear cannot pass its own
                     if inelastic:
-                        self._track_shear(state, cfg, y, z1, rem, drift_reach=bound[n:2 * n])
+                        covered, mask = self._shear_covered(state)
+                        if not covered:
+                            self._track_shear(state, cfg, y, z1, rem, drift_reach=bound[n:2 * n], storeys=~mask)
                     self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
@@ -860,8 +893,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if e_damp is None:
                     e_damp, e_in = segment.energies(w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
+                # (a storey whose |drift| tier 1 kept under its peak is covered as above)
                 if inelastic:
-                    self._track_shear(state, cfg, y, z1, stop, scan=scan, segment=segment)
+                    covered, mask = self._shear_covered(state)
+                    storeys = None if peak_flags is None else peak_flags[n:2 * n] | ~mask
+                    if storeys is None or storeys.any():
+                        self._track_shear(state, cfg, y, z1, stop, scan=scan, segment=segment,
+                                          drift_reach=None if change is None else bound[n:2 * n], storeys=storeys)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
             if event is not None:
@@ -925,7 +963,33 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         q = np.where(yielding, q_yield, elastic_part) if any_yielding else elastic_part
         return self._hard_k * d + q
 
-    def _track_shear(self, state, cfg, y, z1, length, scan=None, drift_reach=None, segment=None):
+    def _shear_covered(self, state) -> tuple[bool, np.ndarray]:
+        """``(all, mask)``: which storeys' ``|V|`` cannot pass its running peak while their
+        ``|drift|`` stays within its running peak ``P`` (a storey whose drift tier 1 cleared in
+        a segment then needs no shear test there), and whether all.
+
+        ``|V| = |alpha k d + q|`` with ``|q| <= (1 - alpha) Fy`` in every state, and for an
+        elastic storey also ``|k d - (1 - alpha) k s| <= k |d| + (1 - alpha) k |s|``: so
+        ``|V| <= min(alpha k P + (1 - alpha) Fy, k P + (1 - alpha) k |s|)`` (the second for elastic
+        storeys).  A storey that has not yielded counts as covered: its shear is ``k d`` and
+        its peak ``k P`` (:meth:`peak_storey_shear`).  Compared with the
+        peak to ``1e-12`` (the two sides are computed differently; the peaks themselves are
+        established to ``PEAK_RTOL``).  Remembered for the arrays it was computed from (a
+        state's arrays are replaced, never changed in place)."""
+        memo = self._cover_memo
+        if (memo is not None and memo[0] is state.peaks and memo[1] is state.peak_shear and memo[2] is state.slip
+                and memo[3] is state.mode and memo[5] is state.yielded):
+            return memo[4]
+        P = state.peak_drift
+        bound = self._hard_k * P + self._yield_q
+        bound = np.where(state.mode == 0, np.minimum(bound, self.k * P + self._elastic_k * np.abs(state.slip)), bound)
+        # a storey that has not yielded is not tracked (peak_storey_shear: k times its peak drift)
+        mask = (bound <= state.peak_shear * (1.0 + 1e-12)) | ~state.yielded
+        covered = (bool(mask.all()), mask)
+        self._cover_memo = (state.peaks, state.peak_shear, state.slip, state.mode, covered, state.yielded)
+        return covered
+
+    def _track_shear(self, state, cfg, y, z1, length, scan=None, drift_reach=None, segment=None, storeys=None):
         """Raise ``state.peak_shear`` over a segment of ``length`` s from ``y`` (``[u0; v0; ag;
         ag'; p]``) to ``z1`` (``[u; v]``) in the state's yield pattern (before its events apply).
 
@@ -935,38 +999,62 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         storey's at an end or at an interior extremum of its drift: where a rigorous bound of
         ``|V|`` over the segment (``drift_reach``, tier 1's bound of the drift's change, or the
         cubic Hermite bound of ``scan``'s drift rows) exceeds the peak, the exact solution is
-        searched (:func:`max_abs` on ``c' z + offset``).  The start was counted by the segment
-        before (or the initial state)."""
+        searched (:func:`max_abs` on ``c' z + offset``); only in ``storeys`` (a mask; all if
+        None: the others are covered, :meth:`_shear_covered`).  The start was counted by the
+        segment before (or the initial state)."""
         n = self.n
-        d1 = _drift(z1[:n])
-        peak = np.maximum(state.peak_shear, np.abs(self._storey_shear_at(state, d1)))
-        elastic = state.mode == 0
-        if elastic.any():
-            shift = self._elastic_k * state.slip            # V = k d - shift (elastic storeys)
-            if drift_reach is not None:
-                reach = np.abs(self.k * _drift(y[:n]) - shift) + self.k * drift_reach
+        # on Python floats: the storeys asked are few (those whose drift tier 1 did not clear)
+        which = range(n) if storeys is None else storeys.nonzero()[0].tolist()
+        if not which:
+            return
+        u1, u0 = z1[:n].tolist(), y[:n].tolist()
+        mode, slip, yielded = state.mode.tolist(), state.slip.tolist(), state.yielded.tolist()
+        k, hard, soft, qy = self._k_list, self._hard_list, self._soft_list, self._qy_list
+        peak = state.peak_shear.tolist()
+        reach_rows = None if drift_reach is None else drift_reach.tolist()
+        if scan is not None:
+            G, B = scan.G.tolist(), scan.B.tolist()
+        w4 = length ** 4 / 384.0
+        raised = False
+        for i in which:
+            d1 = u1[i] - u1[i - 1] if i else u1[0]
+            if mode[i]:
+                V1 = hard[i] * d1 + mode[i] * qy[i]
             else:
-                G, B = scan.G[n:2 * n], scan.B[n:2 * n, 0]
-                lo, hi = hermite_range(G[:, 0], G[:, 1], length * G[:, 2], length * G[:, 3])
-                err = B * (length ** 4 / 384.0)
-                reach = np.maximum(np.abs(self.k * (lo - err) - shift), np.abs(self.k * (hi + err) - shift))
-            candidates = (elastic & (reach > peak)).nonzero()[0].tolist()
-            if candidates:
-                if segment is None:
-                    segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], length)
-                xtol = EVENT_XTOL * length
-                for i in candidates:
-                    k = float(self.k[i])
-                    peak[i], _ = max_abs(segment, k * cfg.peak_modal[n + i], -float(shift[i]), length,
-                                         float(peak[i]), PEAK_XTOL * length, min_width=xtol,
-                                         budget=_ROOT_BUDGET, atol=k * PEAK_ATOL[1])
-        state.peak_shear = peak
+                V1 = hard[i] * d1 + soft[i] * (d1 - slip[i])
+            if abs(V1) > peak[i]:
+                peak[i] = abs(V1)
+                raised = True
+            if mode[i] or not yielded[i]:
+                continue       # yielding: monotonic drift, the peak at an end; not yielded: k drift_peak
+            shift = soft[i] * slip[i]                     # V = k d - shift
+            if reach_rows is not None:
+                d0 = u0[i] - u0[i - 1] if i else u0[0]
+                if abs(k[i] * d0 - shift) + k[i] * reach_rows[i] <= peak[i]:
+                    continue
+            if scan is not None:
+                # the Hermite test (as in _peaks): the drift's range and its error bound
+                g = G[n + i]
+                lo, hi = hermite_range_scalar(g[0], g[1], length * g[2], length * g[3])
+                err = B[n + i][0] * w4 + 1e-12 * (abs(g[0]) + abs(g[1]) + length * (abs(g[2]) + abs(g[3])))
+                if max(abs(k[i] * (lo - err) - shift), abs(k[i] * (hi + err) - shift)) <= peak[i]:
+                    continue
+            if segment is None:
+                segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], length)
+            value, _ = max_abs(segment, k[i] * cfg.peak_modal[n + i], -shift, length, peak[i], PEAK_XTOL * length,
+                               min_width=EVENT_XTOL * length, budget=_ROOT_BUDGET, atol=k[i] * PEAK_ATOL[1])
+            if value > peak[i]:
+                peak[i] = value
+                raised = True
+        if raised:
+            state.peak_shear = np.array(peak)
 
-    def _track_shear_rows(self, state, cfg, Y, z_end, lengths, drift_reach):
+    def _track_shear_rows(self, state, cfg, Y, z_end, lengths, drift_reach, wanted):
         """:meth:`_track_shear` over consecutive intervals in one yield pattern (the batch path):
         ``Y`` their ``y`` rows, ``z_end`` the last one's end, ``lengths`` (s) and
-        ``drift_reach`` (tier 1's bound of each drift's change, rows) theirs.  An interval
-        whose bound stays under the step's largest end value cannot hold the step's peak."""
+        ``drift_reach`` (tier 1's bound of each drift's change, rows) theirs, ``wanted`` (rows)
+        the storeys not covered in each (:meth:`_shear_covered`).  An interval whose bound
+        stays under the step's largest end value cannot hold the step's peak."""
         n = self.n
         count = Y.shape[0]
         U = np.empty((count + 1, n))
@@ -980,7 +1068,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if elastic.any():
             shift = self._elastic_k * state.slip
             reach = np.abs(self.k * d[:count] - shift) + self.k * drift_reach
-            rows, storeys = ((reach > peak) & elastic).nonzero()
+            rows, storeys = ((reach > peak) & (elastic & state.yielded) & wanted).nonzero()
             segments = {}
             for j, i in zip(rows.tolist(), storeys.tolist()):
                 if not reach[j, i] > peak[i]:
@@ -1023,12 +1111,24 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def _switch(self, state, storey: int, kind: int):
         """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
         d = _drift(state.u)[storey]
+        if kind != 0:
+            # the shear where the storey yields (the segment that ended here may have been
+            # covered, :meth:`_shear_covered`, and a storey's first yield starts its tracking)
+            shear = abs(float(self._storey_shear_at(state, _drift(state.u))[storey]))
+            if shear > state.peak_shear[storey]:
+                peak = state.peak_shear.copy()
+                peak[storey] = shear
+                state.peak_shear = peak
         mode = state.mode.copy()
         slip = state.slip.copy()
         if kind == 0:
             slip[storey] = d - mode[storey] * self.dy[storey]   # elastic again, at the limit
         mode[storey] = kind
         state.mode = mode
+        if kind != 0 and not state.yielded[storey]:
+            yielded = state.yielded.copy()      # replaced, never changed in place (shallow copies)
+            yielded[storey] = True
+            state.yielded = yielded
         state.slip = slip
         state.offset = None
 

@@ -136,8 +136,6 @@ class Building(Fmi2Slave):
                description="peak |drift[i]| so far, located inside the steps"),
         *array("a_peak", N_MAX, causality="output", unit="m/s2",
                description="peak |a[i]| so far (the building's own, with the held force), located inside the steps"),
-        *array("V_peak", N_MAX, causality="output", unit="N",
-               description="peak |V[i]| so far, located inside the steps (linear: k[i] drift_peak[i])"),
         *array("drift_ratio_peak", N_MAX, causality="output", unit="1",
                description="drift_peak[i] / storey_height[i]"),
         *array("mu", N_MAX, causality="output", unit="1",
@@ -153,6 +151,9 @@ class Building(Fmi2Slave):
         Variable("E_input", causality="output", unit="J",
                  description="relative input energy of the ground motion, -int v' M 1 ag dt"),
         Variable("E_external", causality="output", unit="J", description="work of the external forces F"),
+        # last: the value references of the variables before it stay those of earlier versions
+        *array("V_peak", N_MAX, causality="output", unit="N",
+               description="peak |V[i]| so far, located inside the steps (linear: k[i] drift_peak[i])"),
     )
     # _stepped_lengths: the canonical zero-order-hold step lengths this history has stepped (part
     # of the state: which path a step takes must replay after fmi2SetFMUstate, see _zoh_entry)
@@ -229,10 +230,11 @@ class Building(Fmi2Slave):
             block[1:4, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
             np.divide(state.peak_drift, self.storey_height[:n], out=block[4, :n])
             np.multiply(state.peak_drift, self._inv_yield_drift, out=block[5, :n])
-            if state.peak_shear is None:     # linear storeys: V = k drift, exactly
+            shear = integ.peak_storey_shear(state)
+            if shear is None:     # linear storeys: V = k drift, exactly
                 np.multiply(state.peak_drift, self._building.stiffnesses, out=block[6, :n])
             else:
-                block[6, :n] = state.peak_shear
+                block[6, :n] = shear
             self._derived_cache = self._derived_rows
         return self._derived_cache
 
