@@ -398,6 +398,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._law_memo = None
         self._shear_memo = None
         self._cover_memo = None
+        self._covered_memo = None
         self._yield_q = (1.0 - self.alpha) * self.fy       # the plastic element's strength (N)
         # the same as Python floats (_track_shear)
         self._k_list, self._hard_list = self.k.tolist(), self._hard_k.tolist()
@@ -598,8 +599,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         e_damp = e_in = 0.0
         flagged = []
         peaks = state.peaks
-        drift_reach = np.empty((count, n)) if inelastic else None
-        drift_need = np.empty((count, n), dtype=bool) if inelastic else None
+        drift_bounds = []                # (intervals, tier-1 bounds, flags) of each group
         drift_flagged = False
         for js in groups.values():
             smap = maps[js[0]]
@@ -612,8 +612,6 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # and the modal amplitudes of z'(0)
             out = Yg @ tier1.T
             bound = np.abs(out[:, 4 * n:]) @ change   # |Re|, |Im| of W z'(0) and |ag slope|
-            if inelastic:
-                drift_reach[js] = bound[:, n:two_n]     # for the storey shears' peaks (_track_shear_rows)
             if inelastic:
                 # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
                 if yielding:
@@ -632,8 +630,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # rigorous), so only the others are tested in _peaks
             need = np.abs(out[:, :3 * n]) + bound[:, :3 * n] > peaks
             if inelastic:
-                drift_need[js] = need[:, n:two_n]
-                drift_flagged = drift_flagged or bool(drift_need[js].any())
+                # for the storey shears' peaks (_track_shear_rows): any drift tier 1 left here?
+                drift_bounds.append((js, bound, need))
+                if not drift_flagged and need.any():
+                    drift_flagged = bool(need[:, n:two_n].any())
             if need.any():
                 rows = need.any(axis=1).nonzero()[0].tolist()
                 scans = Yg[rows] @ smap.scan.T           # the Scan vectors of those intervals only
@@ -659,8 +659,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if inelastic:
             covered, mask = self._shear_covered(state)
             if not covered or drift_flagged:
-                drift_need[:, ~mask] = True
-                self._track_shear_rows(state, cfg, Y, z, positive, drift_reach, drift_need)
+                drift_reach = np.empty((count, n))
+                wanted = np.empty((count, n), dtype=bool)
+                for js, bound, need in drift_bounds:
+                    drift_reach[js] = bound[:, n:two_n]
+                    wanted[js] = need[:, n:two_n]
+                wanted[:, ~mask] = True
+                self._track_shear_rows(state, cfg, Y, z, positive, drift_reach, wanted)
         u1 = z[:n]                  # views of a fresh product: nothing else writes to it
         state.E_external += float(force @ (u1 - state.u))
         if yielding:
@@ -977,17 +982,26 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         established to ``PEAK_RTOL``).  Remembered for the arrays it was computed from (a
         state's arrays are replaced, never changed in place)."""
         memo = self._cover_memo
-        if (memo is not None and memo[0] is state.peaks and memo[1] is state.peak_shear and memo[2] is state.slip
-                and memo[3] is state.mode and memo[5] is state.yielded):
-            return memo[4]
-        P = state.peak_drift
-        bound = self._hard_k * P + self._yield_q
-        bound = np.where(state.mode == 0, np.minimum(bound, self.k * P + self._elastic_k * np.abs(state.slip)), bound)
-        # a storey that has not yielded is not tracked (peak_storey_shear: k times its peak drift)
-        mask = (bound <= state.peak_shear * (1.0 + 1e-12)) | ~state.yielded
-        covered = (bool(mask.all()), mask)
-        self._cover_memo = (state.peaks, state.peak_shear, state.slip, state.mode, covered, state.yielded)
-        return covered
+        if memo is None or memo[0] is not state.peak_shear or memo[1] is not state.slip or memo[2] is not state.mode \
+                or memo[3] is not state.yielded:
+            # the largest P for which that bound stays at the peak, per storey: changes only at
+            # events and when a peak shear grows (the drift peaks change far more often)
+            V = state.peak_shear * (1.0 + 1e-12)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                level = np.where(self._hard_k > 0.0, (V - self._yield_q) / self._hard_k,
+                                 np.where(V >= self._yield_q, np.inf, -np.inf))
+                elastic_level = (V - self._elastic_k * np.abs(state.slip)) / self.k
+            level = np.where(state.mode == 0, np.maximum(level, elastic_level), level)
+            level[~state.yielded] = np.inf     # not tracked (peak_storey_shear: k times the peak drift)
+            memo = self._cover_memo = (state.peak_shear, state.slip, state.mode, state.yielded, level)
+            self._covered_memo = None
+        known = self._covered_memo
+        if known is not None and known[0] is state.peaks:
+            return known[1]
+        mask = state.peak_drift <= memo[4]
+        result = (bool(mask.all()), mask)
+        self._covered_memo = (state.peaks, result)
+        return result
 
     def _track_shear(self, state, cfg, y, z1, length, scan=None, drift_reach=None, segment=None, storeys=None):
         """Raise ``state.peak_shear`` over a segment of ``length`` s from ``y`` (``[u0; v0; ag;
@@ -1013,7 +1027,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         peak = state.peak_shear.tolist()
         reach_rows = None if drift_reach is None else drift_reach.tolist()
         if scan is not None:
-            G, B = scan.G.tolist(), scan.B.tolist()
+            G, B = scan.G[n:2 * n].tolist(), scan.B[n:2 * n, 0].tolist()      # the drift rows
         w4 = length ** 4 / 384.0
         raised = False
         for i in which:
@@ -1034,9 +1048,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     continue
             if scan is not None:
                 # the Hermite test (as in _peaks): the drift's range and its error bound
-                g = G[n + i]
+                g = G[i]
                 lo, hi = hermite_range_scalar(g[0], g[1], length * g[2], length * g[3])
-                err = B[n + i][0] * w4 + 1e-12 * (abs(g[0]) + abs(g[1]) + length * (abs(g[2]) + abs(g[3])))
+                err = B[i] * w4 + 1e-12 * (abs(g[0]) + abs(g[1]) + length * (abs(g[2]) + abs(g[3])))
                 if max(abs(k[i] * (lo - err) - shift), abs(k[i] * (hi + err) - shift)) <= peak[i]:
                     continue
             if segment is None:
