@@ -973,32 +973,29 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         ``|drift|`` stays within its running peak ``P`` (a storey whose drift tier 1 cleared in
         a segment then needs no shear test there), and whether all.
 
-        ``|V| = |alpha k d + q|`` with ``|q| <= (1 - alpha) Fy`` in every state, and for an
-        elastic storey also ``|k d - (1 - alpha) k s| <= k |d| + (1 - alpha) k |s|``: so
-        ``|V| <= min(alpha k P + (1 - alpha) Fy, k P + (1 - alpha) k |s|)`` (the second for elastic
-        storeys).  A storey that has not yielded counts as covered: its shear is ``k d`` and
-        its peak ``k P`` (:meth:`peak_storey_shear`).  Compared with the
-        peak to ``1e-12`` (the two sides are computed differently; the peaks themselves are
-        established to ``PEAK_RTOL``).  Remembered for the arrays it was computed from (a
-        state's arrays are replaced, never changed in place)."""
+        ``|V| = |alpha k d + q|`` with ``|q| <= (1 - alpha) Fy`` in every state, so ``|V| <=
+        alpha k P + (1 - alpha) Fy``; once a storey has yielded, its drift peak is reached while
+        yielding (elastic, it stays within ``2 dy`` of the last yield drift, inside the peak), where
+        ``|V|`` is that bound, so the bound meets its peak shear.  A storey that has not yielded
+        counts as covered: its shear is ``k d`` and its peak ``k P`` (:meth:`peak_storey_shear`).
+        Compared with the peak to ``1e-12`` (the two sides are computed differently; the peaks
+        themselves are established to ``PEAK_RTOL``).  Remembered for the arrays it was computed
+        from (a state's arrays are replaced, never changed in place)."""
         memo = self._cover_memo
-        if memo is None or memo[0] is not state.peak_shear or memo[1] is not state.slip or memo[2] is not state.mode \
-                or memo[3] is not state.yielded:
-            # the largest P for which that bound stays at the peak, per storey: changes only at
-            # events and when a peak shear grows (the drift peaks change far more often)
+        if memo is None or memo[0] is not state.peak_shear or memo[1] is not state.yielded:
+            # the largest P for which that bound stays at the peak, per storey: changes only when
+            # a peak shear grows or a storey first yields (the drift peaks change far more often)
             V = state.peak_shear * (1.0 + 1e-12)
             with np.errstate(divide="ignore", invalid="ignore"):
                 level = np.where(self._hard_k > 0.0, (V - self._yield_q) / self._hard_k,
                                  np.where(V >= self._yield_q, np.inf, -np.inf))
-                elastic_level = (V - self._elastic_k * np.abs(state.slip)) / self.k
-            level = np.where(state.mode == 0, np.maximum(level, elastic_level), level)
             level[~state.yielded] = np.inf     # not tracked (peak_storey_shear: k times the peak drift)
-            memo = self._cover_memo = (state.peak_shear, state.slip, state.mode, state.yielded, level)
+            memo = self._cover_memo = (state.peak_shear, state.yielded, level)
             self._covered_memo = None
         known = self._covered_memo
         if known is not None and known[0] is state.peaks:
             return known[1]
-        mask = state.peak_drift <= memo[4]
+        mask = state.peak_drift <= memo[2]
         result = (bool(mask.all()), mask)
         self._covered_memo = (state.peaks, result)
         return result
