@@ -1015,11 +1015,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         segment before (or the initial state)."""
         n = self.n
         # on Python floats: the storeys asked are few (those whose drift tier 1 did not clear)
-        which = range(n) if storeys is None else storeys.nonzero()[0].tolist()
+        # (a storey that has not yielded is not tracked: peak_storey_shear)
+        asked = state.yielded if storeys is None else storeys & state.yielded
+        which = asked.nonzero()[0].tolist()
         if not which:
             return
         u1, u0 = z1[:n].tolist(), y[:n].tolist()
-        mode, slip, yielded = state.mode.tolist(), state.slip.tolist(), state.yielded.tolist()
+        mode, slip = state.mode.tolist(), state.slip.tolist()
         k, hard, soft, qy = self._k_list, self._hard_list, self._soft_list, self._qy_list
         peak = state.peak_shear.tolist()
         reach_rows = None if drift_reach is None else drift_reach.tolist()
@@ -1036,8 +1038,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             if abs(V1) > peak[i]:
                 peak[i] = abs(V1)
                 raised = True
-            if mode[i] or not yielded[i]:
-                continue       # yielding: monotonic drift, the peak at an end; not yielded: k drift_peak
+            if mode[i]:
+                continue       # yielding: monotonic drift, the peak at an end
             shift = soft[i] * slip[i]                     # V = k d - shift
             if reach_rows is not None:
                 d0 = u0[i] - u0[i - 1] if i else u0[0]
