@@ -21,7 +21,9 @@ Two integrators, one per kind of law, registered in ``INTEGRATORS``:
 
 Both track the energy terms (``E_input``, ``E_external``, ``E_damping``, ``E_hysteretic``) and
 the running peaks of ``|x[i]|``, ``|drift[i]|`` and the absolute floor acceleration ``|a[i]|``
-inside the step, not only at its end.  The exact integrator works in three tiers, so that a
+inside the step, not only at its end, and for yielding storeys that of the storey shear
+``|V[i]|`` (:meth:`ExactPiecewiseLinear._track_shear`; a linear storey's is ``k`` times its
+peak drift).  The exact integrator works in three tiers, so that a
 step where nothing happens costs a few vector operations:
 
 1. a bound on how far every watched function can move in the segment (precomputed per
@@ -128,6 +130,13 @@ class BuildingState:
     # bilinear: the floor forces of the storeys' constant parts D' r (N), a cache of (mode, slip)
     # cleared at every event (r does not depend on the slip of a yielding storey)
     offset: np.ndarray | None = None
+    # yielding storeys (bilinear, Bouc-Wen): the running peak of |V[i]| (N) inside the steps
+    # (:meth:`ExactPiecewiseLinear._track_shear`, :meth:`BoucWenRK.advance`); None for linear
+    # storeys, whose peak shear is k times the peak drift
+    peak_shear: np.ndarray | None = None
+    # bilinear: which storeys have yielded so far (a storey that has not has V = k d, and its peak
+    # shear is k times its peak drift, below Fy, the shear at its first yield)
+    yielded: np.ndarray | None = None
     # segments in which a peak may exceed ``peaks``, searched when the peaks are read
     # (:meth:`ExactPiecewiseLinear.resolve_peaks`): (function, bound, configuration key, y, L, xtol)
     pending: list = field(default_factory=list)
@@ -343,7 +352,21 @@ class BuildingIntegrator:
                               peaks=np.zeros(3 * n))
         f = np.zeros(n) if force is None else np.asarray(force, float)
         state.peaks = np.concatenate([np.abs(u0), np.abs(d0), np.abs(self.absolute_acceleration(state, f))])
+        if self._inelastic:
+            state.peak_shear = np.abs(self.storey_shear(state))
+            if self.hysteresis.model == "bilinear":
+                state.yielded = np.zeros(n, dtype=bool)
         return state
+
+    def peak_storey_shear(self, state: BuildingState) -> np.ndarray | None:
+        """The running peak of every storey's ``|V|`` (N), the deferred peak searches run first
+        (:meth:`resolve_peaks`); None for linear storeys (``k`` times the peak drift)."""
+        if state.peak_shear is None:
+            return None
+        if state.yielded is None:
+            return state.peak_shear
+        self.resolve_peaks(state)
+        return np.where(state.yielded, state.peak_shear, self.k * state.peak_drift)
 
     def advance(self, state: BuildingState, times, ag, force) -> StepCost:
         raise NotImplementedError
@@ -374,6 +397,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._hard_k = self.alpha * self.k                  # the hardening spring
         self._law_memo = None
         self._shear_memo = None
+        self._cover_memo = None
+        self._covered_memo = None
+        self._yield_q = (1.0 - self.alpha) * self.fy       # the plastic element's strength (N)
+        # the same as Python floats (_track_shear)
+        self._k_list, self._hard_list = self.k.tolist(), self._hard_k.tolist()
+        self._soft_list, self._qy_list = self._elastic_k.tolist(), self._yield_q.tolist()
         limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
         self._second_order_limits = (limit, -limit)
         # a linear building's one-interval step matrices by canonical length, and by every
@@ -570,6 +599,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         e_damp = e_in = 0.0
         flagged = []
         peaks = state.peaks
+        drift_bounds = []                # (intervals, tier-1 bounds, flags) of each group
+        drift_flagged = False
         for js in groups.values():
             smap = maps[js[0]]
             _, tier1, change, forms, _ = self._batch_plan(smap)
@@ -598,6 +629,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # function cleared here cannot pass the peaks anywhere in the interval (tier 1 is
             # rigorous), so only the others are tested in _peaks
             need = np.abs(out[:, :3 * n]) + bound[:, :3 * n] > peaks
+            if inelastic:
+                # for the storey shears' peaks (_track_shear_rows): any drift tier 1 left here?
+                drift_bounds.append((js, bound, need))
+                if not drift_flagged and need.any():
+                    drift_flagged = bool(need[:, n:two_n].any())
             if need.any():
                 rows = need.any(axis=1).nonzero()[0].tolist()
                 scans = Yg[rows] @ smap.scan.T           # the Scan vectors of those intervals only
@@ -618,6 +654,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
         state.E_damping += e_damp
         state.E_input += e_in
+        # a covered storey whose |drift| tier 1 kept under its peak in an interval cannot pass its
+        # own peak shear there
+        if inelastic:
+            covered, mask = self._shear_covered(state)
+            if not covered or drift_flagged:
+                drift_reach = np.empty((count, n))
+                wanted = np.empty((count, n), dtype=bool)
+                for js, bound, need in drift_bounds:
+                    drift_reach[js] = bound[:, n:two_n]
+                    wanted[js] = need[:, n:two_n]
+                wanted[:, ~mask] = True
+                self._track_shear_rows(state, cfg, Y, z, positive, drift_reach, wanted)
         u1 = z[:n]                  # views of a fresh product: nothing else writes to it
         state.E_external += float(force @ (u1 - state.u))
         if yielding:
@@ -827,6 +875,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     quiet = True
                 if quiet and not peak_flags.any():
                     cost.cleared += 1
+                    # tier 1 kept every |drift| under its peak: a covered storey's shear cannot pass its own
+                    if inelastic:
+                        covered, mask = self._shear_covered(state)
+                        if not covered:
+                            self._track_shear(state, cfg, y, z1, rem, drift_reach=bound[n:2 * n], storeys=~mask)
                     self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
@@ -845,6 +898,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if e_damp is None:
                     e_damp, e_in = segment.energies(w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
+                # (a storey whose |drift| tier 1 kept under its peak is covered as above)
+                if inelastic:
+                    covered, mask = self._shear_covered(state)
+                    storeys = None if peak_flags is None else peak_flags[n:2 * n] | ~mask
+                    if storeys is None or storeys.any():
+                        self._track_shear(state, cfg, y, z1, stop, scan=scan, segment=segment,
+                                          drift_reach=None if change is None else bound[n:2 * n], storeys=storeys)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
             s += stop
             if event is not None:
@@ -900,6 +960,143 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         unload_flags &= np.minimum(g0, g1) <= 1e-12 * np.abs(g0)
         return not (up_flags.any() or down_flags.any() or unload_flags.any())
 
+    def _storey_shear_at(self, state, d):
+        """``V`` of drifts ``d`` (any shape ending in n) in the state's yield pattern: a yielding
+        storey ``alpha k d + (1 - alpha) Fy mode``, an elastic one ``k d - (1 - alpha) k s``."""
+        _, yielding, any_yielding, q_yield, _, _ = self._law_facts(state.mode)
+        elastic_part = self._elastic_k * (d - state.slip)
+        q = np.where(yielding, q_yield, elastic_part) if any_yielding else elastic_part
+        return self._hard_k * d + q
+
+    def _shear_covered(self, state) -> tuple[bool, np.ndarray]:
+        """``(all, mask)``: which storeys' ``|V|`` cannot pass its running peak while their
+        ``|drift|`` stays within its running peak ``P`` (a storey whose drift tier 1 cleared in
+        a segment then needs no shear test there), and whether all.
+
+        ``|V| = |alpha k d + q|`` with ``|q| <= (1 - alpha) Fy`` in every state, so ``|V| <=
+        alpha k P + (1 - alpha) Fy``; once a storey has yielded, its drift peak is reached while
+        yielding (elastic, it stays within ``2 dy`` of the last yield drift, inside the peak), where
+        ``|V|`` is that bound, so the bound meets its peak shear.  A storey that has not yielded
+        counts as covered: its shear is ``k d`` and its peak ``k P`` (:meth:`peak_storey_shear`).
+        Compared with the peak to ``1e-12`` (the two sides are computed differently; the peaks
+        themselves are established to ``PEAK_RTOL``).  Remembered for the arrays it was computed
+        from (a state's arrays are replaced, never changed in place)."""
+        memo = self._cover_memo
+        if memo is None or memo[0] is not state.peak_shear or memo[1] is not state.yielded:
+            # the largest P for which that bound stays at the peak, per storey: changes only when
+            # a peak shear grows or a storey first yields (the drift peaks change far more often)
+            V = state.peak_shear * (1.0 + 1e-12)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                level = np.where(self._hard_k > 0.0, (V - self._yield_q) / self._hard_k,
+                                 np.where(V >= self._yield_q, np.inf, -np.inf))
+            level[~state.yielded] = np.inf     # not tracked (peak_storey_shear: k times the peak drift)
+            memo = self._cover_memo = (state.peak_shear, state.yielded, level)
+            self._covered_memo = None
+        known = self._covered_memo
+        if known is not None and known[0] is state.peaks:
+            return known[1]
+        mask = state.peak_drift <= memo[2]
+        result = (bool(mask.all()), mask)
+        self._covered_memo = (state.peaks, result)
+        return result
+
+    def _track_shear(self, state, cfg, y, z1, length, scan=None, drift_reach=None, segment=None, storeys=None):
+        """Raise ``state.peak_shear`` over a segment of ``length`` s from ``y`` (``[u0; v0; ag;
+        ag'; p]``) to ``z1`` (``[u; v]``) in the state's yield pattern (before its events apply).
+
+        Between events a storey's shear is linear in its drift: yielding, ``alpha k d + const``
+        with the drift monotonic (unloading is an event); elastic, ``k d - (1 - alpha) k s``
+        with the slip fixed.  So a yielding storey's peak is at a segment end, and an elastic
+        storey's at an end or at an interior extremum of its drift: where a rigorous bound of
+        ``|V|`` over the segment (``drift_reach``, tier 1's bound of the drift's change, or the
+        cubic Hermite bound of ``scan``'s drift rows) exceeds the peak, the exact solution is
+        searched (:func:`max_abs` on ``c' z + offset``); only in ``storeys`` (a mask; all if
+        None: the others are covered, :meth:`_shear_covered`).  The start was counted by the
+        segment before (or the initial state)."""
+        n = self.n
+        # on Python floats: the storeys asked are few (those whose drift tier 1 did not clear)
+        # (a storey that has not yielded is not tracked: peak_storey_shear)
+        asked = state.yielded if storeys is None else storeys & state.yielded
+        which = asked.nonzero()[0].tolist()
+        if not which:
+            return
+        u1, u0 = z1[:n].tolist(), y[:n].tolist()
+        mode, slip = state.mode.tolist(), state.slip.tolist()
+        k, hard, soft, qy = self._k_list, self._hard_list, self._soft_list, self._qy_list
+        peak = state.peak_shear.tolist()
+        reach_rows = None if drift_reach is None else drift_reach.tolist()
+        if scan is not None:
+            G, B = scan.G[n:2 * n].tolist(), scan.B[n:2 * n, 0].tolist()      # the drift rows
+        w4 = length ** 4 / 384.0
+        raised = False
+        for i in which:
+            d1 = u1[i] - u1[i - 1] if i else u1[0]
+            if mode[i]:
+                V1 = hard[i] * d1 + mode[i] * qy[i]
+            else:
+                V1 = hard[i] * d1 + soft[i] * (d1 - slip[i])
+            if abs(V1) > peak[i]:
+                peak[i] = abs(V1)
+                raised = True
+            if mode[i]:
+                continue       # yielding: monotonic drift, the peak at an end
+            shift = soft[i] * slip[i]                     # V = k d - shift
+            if reach_rows is not None:
+                d0 = u0[i] - u0[i - 1] if i else u0[0]
+                if abs(k[i] * d0 - shift) + k[i] * reach_rows[i] <= peak[i]:
+                    continue
+            if scan is not None:
+                # the Hermite test (as in _peaks): the drift's range and its error bound
+                g = G[i]
+                lo, hi = hermite_range_scalar(g[0], g[1], length * g[2], length * g[3])
+                err = B[i] * w4 + 1e-12 * (abs(g[0]) + abs(g[1]) + length * (abs(g[2]) + abs(g[3])))
+                if max(abs(k[i] * (lo - err) - shift), abs(k[i] * (hi + err) - shift)) <= peak[i]:
+                    continue
+            if segment is None:
+                segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], length)
+            value, _ = max_abs(segment, k[i] * cfg.peak_modal[n + i], -shift, length, peak[i], PEAK_XTOL * length,
+                               min_width=EVENT_XTOL * length, budget=_ROOT_BUDGET, atol=k[i] * PEAK_ATOL[1])
+            if value > peak[i]:
+                peak[i] = value
+                raised = True
+        if raised:
+            state.peak_shear = np.array(peak)
+
+    def _track_shear_rows(self, state, cfg, Y, z_end, lengths, drift_reach, wanted):
+        """:meth:`_track_shear` over consecutive intervals in one yield pattern (the batch path):
+        ``Y`` their ``y`` rows, ``z_end`` the last one's end, ``lengths`` (s) and
+        ``drift_reach`` (tier 1's bound of each drift's change, rows) theirs, ``wanted`` (rows)
+        the storeys not covered in each (:meth:`_shear_covered`).  An interval whose bound
+        stays under the step's largest end value cannot hold the step's peak."""
+        n = self.n
+        count = Y.shape[0]
+        U = np.empty((count + 1, n))
+        U[:count] = Y[:, :n]
+        U[count] = z_end[:n]
+        d = U.copy()
+        d[:, 1:] -= U[:, :n - 1]
+        V = np.abs(self._storey_shear_at(state, d))
+        peak = np.maximum(state.peak_shear, V[1:].max(axis=0))
+        elastic = state.mode == 0
+        if elastic.any():
+            shift = self._elastic_k * state.slip
+            reach = np.abs(self.k * d[:count] - shift) + self.k * drift_reach
+            rows, storeys = ((reach > peak) & (elastic & state.yielded) & wanted).nonzero()
+            segments = {}
+            for j, i in zip(rows.tolist(), storeys.tolist()):
+                if not reach[j, i] > peak[i]:
+                    continue                          # a peak found in an earlier interval covers it
+                y = Y[j]
+                L = float(lengths[j])
+                segment = segments.get(j)
+                if segment is None:
+                    segment = segments[j] = TaylorSegment(cfg, y[:2 * n], y[2 * n:], L)
+                k = float(self.k[i])
+                peak[i], _ = max_abs(segment, k * cfg.peak_modal[n + i], -float(shift[i]), L, float(peak[i]),
+                                     PEAK_XTOL * L, min_width=EVENT_XTOL * L, budget=_ROOT_BUDGET,
+                                     atol=k * PEAK_ATOL[1])
+        state.peak_shear = peak
+
     def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
         """End a segment at ``z1`` (a fresh array: the state keeps views of it).  ``yielding``
         False: no storey yields in this segment (its hysteretic state stays)."""
@@ -927,12 +1124,24 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def _switch(self, state, storey: int, kind: int):
         """Apply an event: ``kind`` = +1/-1 yield in that direction, 0 unloading."""
         d = _drift(state.u)[storey]
+        if kind != 0:
+            # the shear where the storey yields (the segment that ended here may have been
+            # covered, :meth:`_shear_covered`, and a storey's first yield starts its tracking)
+            shear = abs(float(self._storey_shear_at(state, _drift(state.u))[storey]))
+            if shear > state.peak_shear[storey]:
+                peak = state.peak_shear.copy()
+                peak[storey] = shear
+                state.peak_shear = peak
         mode = state.mode.copy()
         slip = state.slip.copy()
         if kind == 0:
             slip[storey] = d - mode[storey] * self.dy[storey]   # elastic again, at the limit
         mode[storey] = kind
         state.mode = mode
+        if kind != 0 and not state.yielded[storey]:
+            yielded = state.yielded.copy()      # replaced, never changed in place (shallow copies)
+            yielded[storey] = True
+            state.yielded = yielded
         state.slip = slip
         state.offset = None
 
@@ -1332,7 +1541,7 @@ class BoucWenRK(BuildingIntegrator):
         return fun
 
     def _peak_values(self, y, dy_dt, force):
-        """Values and time derivatives of the tracked functions (x, drift, a) at one point."""
+        """Values and time derivatives of the tracked functions (x, drift, a, V) at one point."""
         n = self.n
         u, v, z = y[:n], y[n:2 * n], y[2 * n:3 * n]
         acc_rel, zdot = dy_dt[n:2 * n], dy_dt[2 * n:3 * n]
@@ -1341,7 +1550,7 @@ class BoucWenRK(BuildingIntegrator):
         Vdot = self.alpha * self.k * dd + (1.0 - self.alpha) * self.fy * zdot
         a = (force - self.C @ v - _floor_forces(V)) / self.masses
         adot = (-self.C @ acc_rel - _floor_forces(Vdot)) / self.masses
-        return np.concatenate([u, d, a]), np.concatenate([v, dd, adot])
+        return np.concatenate([u, d, a, V]), np.concatenate([v, dd, adot, Vdot])
 
     def advance(self, state, times, ag, force) -> StepCost:
         times = np.asarray(times, dtype=float)
@@ -1357,7 +1566,8 @@ class BoucWenRK(BuildingIntegrator):
                              f"{BOUC_WEN_MAX_SPAN / (2.0 * math.pi):.0f} periods): use shorter steps")
         u_start = state.u.copy()
         y = np.concatenate([state.u, state.v, state.z, [0.0, 0.0, 0.0]])
-        peaks = state.peaks.copy()
+        # the running peaks of x, drift, a and the storey shear V, located alike
+        peaks = np.concatenate((state.peaks, state.peak_shear))
         for j in range(times.size - 1):
             length = float(times[j + 1] - times[j])
             if length <= 0.0:
@@ -1406,7 +1616,8 @@ class BoucWenRK(BuildingIntegrator):
         state.E_input += float(y[3 * n + 1])
         state.E_hysteretic += float(y[3 * n + 2])
         state.E_external += float(force @ (y[:n] - u_start))
-        state.peaks = peaks
+        state.peaks = peaks[:3 * n]
+        state.peak_shear = peaks[3 * n:]
         return cost
 
 

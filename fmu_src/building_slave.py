@@ -29,7 +29,9 @@ a step over several record intervals of one length in one product, a step of one
 interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen
 by an embedded Runge-Kutta 8(5,3) method with error control.  Outputs are at the end of the step; ``a[i]`` is the absolute acceleration
 with the step's force.  Running peaks (``x_peak``, ``drift_peak``, ``a_peak``, and from them
-``mu``, ``drift_ratio_peak``) are located inside every step.  Energies ``E_input``,
+``mu``, ``drift_ratio_peak``) are located inside every step; ``V_peak`` (storey shear) is ``k
+drift_peak`` for linear storeys and located alike for yielding ones
+(``ExactPiecewiseLinear._track_shear``, ``BoucWenRK.advance``).  Energies ``E_input``,
 ``E_external``, ``E_damping`` and ``E_hysteretic`` accumulate from the start; ``E_kinetic`` and
 ``E_strain`` (the elastic part) are instantaneous, so that ``E_input + E_external + E0 =
 E_kinetic + E_strain + E_damping + E_hysteretic`` with ``E0`` the initial kinetic + strain energy.
@@ -72,7 +74,7 @@ _KNOT_TIME_TOL = 1e-9
 # them: default_inelastic ran 239 searches with V read at every step, 32 without).
 # drift_residual is published at every step instead: the master reads it at every step to prove
 # a gap open for a yielding building (cosim/master/gap_bound.py).
-_DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu")
+_DERIVED = ("V", "x_peak", "drift_peak", "a_peak", "drift_ratio_peak", "mu", "V_peak")
 
 
 class Building(Fmi2Slave):
@@ -149,6 +151,9 @@ class Building(Fmi2Slave):
         Variable("E_input", causality="output", unit="J",
                  description="relative input energy of the ground motion, -int v' M 1 ag dt"),
         Variable("E_external", causality="output", unit="J", description="work of the external forces F"),
+        # last: the value references of the variables before it stay those of earlier versions
+        *array("V_peak", N_MAX, causality="output", unit="N",
+               description="peak |V[i]| so far, located inside the steps (linear: k[i] drift_peak[i])"),
     )
     # _stepped_lengths: the canonical zero-order-hold step lengths this history has stepped (part
     # of the state: which path a step takes must replay after fmi2SetFMUstate, see _zoh_entry)
@@ -225,6 +230,11 @@ class Building(Fmi2Slave):
             block[1:4, :n] = state.peaks.reshape(3, n)  # x_peak, drift_peak, a_peak
             np.divide(state.peak_drift, self.storey_height[:n], out=block[4, :n])
             np.multiply(state.peak_drift, self._inv_yield_drift, out=block[5, :n])
+            shear = integ.peak_storey_shear(state)
+            if shear is None:     # linear storeys: V = k drift, exactly
+                np.multiply(state.peak_drift, self._building.stiffnesses, out=block[6, :n])
+            else:
+                block[6, :n] = shear
             self._derived_cache = self._derived_rows
         return self._derived_cache
 

@@ -81,6 +81,10 @@ def test_yielding_building_fmu_is_its_physics_and_balances_energy(building_fmu, 
     np.testing.assert_allclose(residual, drift - V / b.stiffnesses, rtol=1e-12, atol=1e-15)
     assert out["base_shear"] == V[0]
     np.testing.assert_allclose(s.get(*names("drift_ratio_peak")), s.get(*names("drift_peak")) / 3.0, rtol=1e-15)
+    # the storey shears' running peak: the physics' own, never below the end value
+    shear = it.peak_storey_shear(st)
+    np.testing.assert_array_equal(s.get(*names("V_peak")), shear)
+    assert np.all(shear >= np.abs(V))
     s.close()
 
 
@@ -96,6 +100,11 @@ def test_bilinear_that_never_yields_equals_the_linear_building(building_fmu):
         names("x_peak") + names("a_peak")
     a, b = lin.get(*keys), bil.get(*keys)
     np.testing.assert_allclose(b, a, rtol=1e-10, atol=1e-13 * np.abs(a).max())
+    # the linear building's V_peak is k drift_peak; the bilinear one's, searched on its own
+    # exact solution where a bound of |V| exceeds it, the same to the searches' PEAK_RTOL (1e-9)
+    k = lin.get(*names("V")) / lin.get(*names("drift"))
+    np.testing.assert_allclose(lin.get(*names("V_peak")), k * lin.get(*names("drift_peak")), rtol=1e-14)
+    np.testing.assert_allclose(bil.get(*names("V_peak")), lin.get(*names("V_peak")), rtol=3e-9)
     assert bil.get("E_hysteretic")[0] == 0.0
     for s in (lin, bil):
         s.close()
@@ -227,7 +236,8 @@ def test_bad_knot_inputs_are_refused(building_fmu, inputs, fragment):
 def test_state_save_restore_includes_the_hysteretic_state(building_fmu, model):
     s = Slave(building_fmu, f"state_{model}", **params(hysteresis=model, **strengths()))
     _, ags = record_steps(0.01, 260)
-    keys = names("x") + names("V") + names("drift_residual") + names("mu") + ["E_hysteretic", "E_strain"]
+    keys = names("x") + names("V") + names("drift_residual") + names("mu") + names("V_peak") + \
+        ["E_hysteretic", "E_strain"]
     for ag in ags[:200]:
         s.step(0.01, ag=ag)
     state = s.fmu.getFMUstate()
@@ -243,6 +253,33 @@ def test_state_save_restore_includes_the_hysteretic_state(building_fmu, model):
         s.t = t0
     s.fmu.freeFMUstate(state)
     assert runs[0][:, -2].max() > 0.0, "no yielding: the test would prove nothing"
+    np.testing.assert_array_equal(runs[0], runs[1])
+    s.close()
+
+
+@pytest.mark.parametrize("model", ["bilinear", "bouc_wen"])
+def test_state_save_restore_restores_the_peak_storey_shear(building_fmu, model):
+    """V_peak is part of the FMU state: a state saved before the strong motion and restored
+    gives the V_peak of that moment, then the same history again (its peaks grow after it)."""
+    s = Slave(building_fmu, f"vpeak_{model}", **params(hysteresis=model, **strengths()))
+    _, ags = record_steps(0.05, 60, start=1.0)        # 1 to 4 s: El Centro's strong motion from 1.5 s
+    for ag in ags[:10]:
+        s.step(0.05, ag=ag)
+    saved = s.get(*names("V_peak"))
+    state = s.fmu.getFMUstate()
+    t0 = s.t
+    runs = []
+    for _ in range(2):
+        out = []
+        for ag in ags[10:]:
+            s.step(0.05, ag=ag)
+            out.append(s.get(*names("V_peak")))
+        runs.append(np.array(out))
+        s.fmu.setFMUstate(state)
+        s.t = t0
+        np.testing.assert_array_equal(s.get(*names("V_peak")), saved)
+    s.fmu.freeFMUstate(state)
+    assert np.all(runs[0][-1] > 2.0 * saved), "the peaks must grow after the saved state to test its restore"
     np.testing.assert_array_equal(runs[0], runs[1])
     s.close()
 
