@@ -232,26 +232,39 @@ def test_bad_knot_inputs_are_refused(building_fmu, inputs, fragment):
     s.close()
 
 
+def _twice_from_a_saved_state(s, h, before, after, keys, outputs_at_state=None):
+    """Step ``s`` through ``before`` (ground accelerations, m/s^2, steps of ``h`` s), save the FMU
+    state, then twice: step through ``after`` reading ``keys`` at every step, and restore the
+    state.  Returns the two runs (steps x keys); ``outputs_at_state``, if given, receives the
+    ``keys`` read when the state was saved and after the last restore."""
+    for ag in before:
+        s.step(h, ag=ag)
+    if outputs_at_state is not None:
+        outputs_at_state.append(s.get(*keys))
+    state = s.fmu.getFMUstate()
+    t0 = s.t
+    runs = []
+    for _ in range(2):
+        out = []
+        for ag in after:
+            s.step(h, ag=ag)
+            out.append(s.get(*keys))
+        runs.append(np.array(out))
+        s.fmu.setFMUstate(state)
+        s.t = t0
+    if outputs_at_state is not None:
+        outputs_at_state.append(s.get(*keys))
+    s.fmu.freeFMUstate(state)
+    return runs
+
+
 @pytest.mark.parametrize("model", ["bilinear", "bouc_wen"])
 def test_state_save_restore_includes_the_hysteretic_state(building_fmu, model):
     s = Slave(building_fmu, f"state_{model}", **params(hysteresis=model, **strengths()))
     _, ags = record_steps(0.01, 260)
     keys = names("x") + names("V") + names("drift_residual") + names("mu") + names("V_peak") + \
         ["E_hysteretic", "E_strain"]
-    for ag in ags[:200]:
-        s.step(0.01, ag=ag)
-    state = s.fmu.getFMUstate()
-    t0 = s.t
-    runs = []
-    for _ in range(2):
-        out = []
-        for ag in ags[200:]:
-            s.step(0.01, ag=ag)
-            out.append(s.get(*keys))
-        runs.append(np.array(out))
-        s.fmu.setFMUstate(state)
-        s.t = t0
-    s.fmu.freeFMUstate(state)
+    runs = _twice_from_a_saved_state(s, 0.01, ags[:200], ags[200:], keys)
     assert runs[0][:, -2].max() > 0.0, "no yielding: the test would prove nothing"
     np.testing.assert_array_equal(runs[0], runs[1])
     s.close()
@@ -263,22 +276,10 @@ def test_state_save_restore_restores_the_peak_storey_shear(building_fmu, model):
     gives the V_peak of that moment, then the same history again (its peaks grow after it)."""
     s = Slave(building_fmu, f"vpeak_{model}", **params(hysteresis=model, **strengths()))
     _, ags = record_steps(0.05, 60, start=1.0)        # 1 to 4 s: El Centro's strong motion from 1.5 s
-    for ag in ags[:10]:
-        s.step(0.05, ag=ag)
-    saved = s.get(*names("V_peak"))
-    state = s.fmu.getFMUstate()
-    t0 = s.t
-    runs = []
-    for _ in range(2):
-        out = []
-        for ag in ags[10:]:
-            s.step(0.05, ag=ag)
-            out.append(s.get(*names("V_peak")))
-        runs.append(np.array(out))
-        s.fmu.setFMUstate(state)
-        s.t = t0
-        np.testing.assert_array_equal(s.get(*names("V_peak")), saved)
-    s.fmu.freeFMUstate(state)
+    saved = []
+    runs = _twice_from_a_saved_state(s, 0.05, ags[:10], ags[10:], names("V_peak"), saved)
+    saved, restored = saved
+    np.testing.assert_array_equal(restored, saved)
     assert np.all(runs[0][-1] > 2.0 * saved), "the peaks must grow after the saved state to test its restore"
     np.testing.assert_array_equal(runs[0], runs[1])
     s.close()
