@@ -174,8 +174,8 @@ class ModalBound:
         zeta w q0)``; ``As`` is each mode's unit impulse response ``h_j(s)``."""
         Ac = np.ones((self.n, s.size))
         As = np.tile(s, (self.n, 1))
-        # the underdamped modes (every mode of a linear building) at once: the same elementwise
-        # operations on the same numbers as the loop below, one call each for all of them
+        # the underdamped modes (every mode of a linear building) at once, one call each for all
+        # of them; the loop below takes the others (zero stiffness, overdamped, critical)
         under = np.flatnonzero((self.w > 0.0) & (self.zeta < 1.0))
         if under.size:
             w, z = self.w[under], self.zeta[under]
@@ -194,11 +194,7 @@ class ModalBound:
                     Ac[j] = 1.0 - self.zeta_w[j] * As[j]
                 continue                           # undamped, a free mass: q = q0 + q0' s
             decay = np.exp(-zj * wj * s)
-            if zj < 1.0:
-                wd = wj * math.sqrt(1.0 - zj * zj)
-                Ac[j] = decay * np.cos(wd * s)
-                As[j] = decay * np.sin(wd * s) / wd
-            elif zj > 1.0:
+            if zj > 1.0:
                 ws = wj * math.sqrt(zj * zj - 1.0)
                 if ws * s[-1] < _COSH_SAFE:
                     Ac[j] = decay * np.cosh(ws * s)
@@ -213,15 +209,11 @@ class ModalBound:
         return Ac, As
 
     # -- the free motion and the forced bound on a grid of s = H k / GRID ------------------------------
-    def tables(self, H: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(s, Ac, As, G)`` on ``s_k = H k / GRID``: ``q_free = Ac q0 + As (q0' + zeta w q0)``
-        (modes x points) and ``G_j(s_k)`` (modes x points); cached per ``H``."""
-        return self._cached(H)[:4]
-
     def _cached(self, H: float) -> tuple[np.ndarray, ...]:
-        """:meth:`tables` and, per ``H``, what the forced bound of a unit ground acceleration is
-        on every floor, ``sum_j |Phi_fj Gamma_j| G_j(s_k)`` (floors x points), and on every
-        floor then every storey drift (:attr:`rows`): a proof scales them by its ground bound
+        """``(s, Ac, As, G, ...)`` on ``s_k = H k / GRID``, cached per ``H``: ``q_free = Ac q0 + As
+        (q0' + zeta w q0)`` and ``G_j(s_k)`` (modes x points), then what the forced bound of a
+        unit ground acceleration is on every floor, ``sum_j |Phi_fj Gamma_j| G_j(s_k)`` (floors x
+        points), and on every floor then every storey drift (:attr:`rows`): a proof scales them by its ground bound
         (a run's proofs use a few horizons only: computed once per horizon, not per proof).  A
         bound through yielding (:attr:`plastic` set) has its floors' ground bound from their
         impulse responses where tighter, and last the storey forces' bound on every floor
@@ -290,16 +282,6 @@ class ModalBound:
         q = self.to_modal @ u
         qd = self.to_modal @ v
         return [q[:, None], (qd + self.zeta_w * q)[:, None], np.sqrt((self.w * q) ** 2 + qd * qd), None]
-
-    def free_motion(self, u: np.ndarray, v: np.ndarray, H: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(Q, speed)``: the modal free motion ``q_j(s_k)`` (modes x points) from the floor
-        displacements ``u`` and velocities ``v`` (m, m/s, relative to the ground) and the bound
-        ``sqrt(w_j^2 q_j^2 + q_j'^2)`` on each mode's free rate (m/s, modal units)."""
-        q = self.to_modal @ u
-        qd = self.to_modal @ v
-        _, Ac, As, _ = self.tables(H)
-        Q = Ac * q[:, None] + As * (qd + self.zeta_w * q)[:, None]
-        return Q, np.sqrt((self.w * q) ** 2 + qd * qd)
 
 
 class FloorMotion:
@@ -869,10 +851,11 @@ class OpenGaps:
         its linear bound only).  Returns each level's horizon (s)."""
         dS = H / GRID
 
-        def envelope(b: str, floors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            # (upper, lower) bound of each floor over each grid interval: the free part within its
-            # rate bound of its chord's mean, the forced part at the interval's end
-            up = lo = None
+        def envelope(b: str, floors: np.ndarray, sign: float) -> np.ndarray:
+            # sign * the upper (sign = 1) or lower (-1) bound of each floor over each grid
+            # interval, the tighter of its parts: the free part within its rate bound of its
+            # chord's mean, the forced part at the interval's end
+            out = None
             parts = []
             s = prove_linear(b)
             if s > 0.0:                     # the linear bound's intervals: those ending by s
@@ -887,16 +870,14 @@ class OpenGaps:
                 mid = x[:, :-1] + x[:, 1:]
                 mid *= 0.5
                 slack = (0.5 * dS * rate[floors])[:, None] + forced[floors, 1:]
-                hi, low = mid + slack, mid - slack
+                edge = sign * mid + slack
                 if valid < GRID:
-                    hi[:, valid:] = np.inf
-                    low[:, valid:] = -np.inf
-                up = hi if up is None else np.minimum(up, hi)
-                lo = low if lo is None else np.maximum(lo, low)
-            return up, lo
+                    edge[:, valid:] = np.inf
+                out = edge if out is None else np.minimum(out, edge)
+            return out
 
-        up, _ = envelope(left, fl)
-        _, lo = envelope(right, fr)
+        up = envelope(left, fl, 1.0)
+        lo = -envelope(right, fr, -1.0)
         bad = up - lo - gap >= 0.0
         first = bad.argmax(axis=1).tolist()
         hit = _ANY(bad, axis=1).tolist()
