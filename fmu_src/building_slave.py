@@ -471,19 +471,9 @@ class Building(Fmi2Slave):
         except ValueError as exc:
             raise SlaveError(f"{exc} (nothing was changed)") from None
         n = self._n
-        self.x[:n] = w[:n]
-        self.v[:n] = w[n:2 * n]
-        self.a[:n] = w[2 * n:3 * n]
-        self.drift[:n] = w[3 * n:4 * n]
-        self.base_shear = float(self._building.stiffnesses[0] * w[0])
         k = ramp_energy_rows(n)         # sqrt(m) v1, then sqrt(k) d1
-        self.E_kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
-        self.E_strain = 0.5 * float(w[k + n:k + 2 * n] @ w[k + n:k + 2 * n])
-        self.E_external = state.E_external
-        self.E_input = state.E_input
-        self.E_damping = state.E_damping
-        self._derived_cache = None
-        self._shear_fresh = False
+        self._publish_product(w, 0.5 * float(w[k:k + n] @ w[k:k + n]),
+                              0.5 * float(w[k + n:k + 2 * n] @ w[k + n:k + 2 * n]))
 
     def _count(self, cost: StepCost) -> None:
         total = self.cost
@@ -535,14 +525,21 @@ class Building(Fmi2Slave):
             self._integrator.legacy_peaks(state, y, start @ y, scan, change, step_size, self.cost)
         state.u = w[:n]           # views of the fresh product: nothing else writes to w
         state.v = w[n:2 * n]
-        self.x[:n] = w[:n]
-        self.v[:n] = w[n:2 * n]
-        self.a[:n] = w[2 * n:3 * n]
-        self.drift[:n] = w[3 * n:i]
-        self.base_shear = float(self._building.stiffnesses[0] * w[0])
         state.E_external += d_external
         state.E_input += d_input
         state.E_damping += d_damping
+        self._publish_product(w, kinetic, strain)
+
+    def _publish_product(self, w: np.ndarray, kinetic: float, strain: float) -> None:
+        """Outputs of a linear building's step taken as one product ``w = [u1; v1; a1; drift1;
+        ...]`` (:meth:`_linear_step`, :meth:`_ramp_step`), with its kinetic and strain energies
+        (J) and the state's energy sums already advanced."""
+        n, state = self._n, self._state
+        self.x[:n] = w[:n]
+        self.v[:n] = w[n:2 * n]
+        self.a[:n] = w[2 * n:3 * n]
+        self.drift[:n] = w[3 * n:4 * n]
+        self.base_shear = float(self._building.stiffnesses[0] * w[0])
         self.E_external = state.E_external
         self.E_input = state.E_input
         self.E_damping = state.E_damping
