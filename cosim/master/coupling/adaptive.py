@@ -244,11 +244,6 @@ class Adaptive(CouplingStrategy):
         self._proven = [-math.inf] * len(self.levels)      # s: each gap proven open until then (F = 0)
         self._kinematics: list = []                        # each level's (delta, rate, its rate) at the step start
         self._now_active: list = []                        # each contact has something to do at the step start (_levels_now)
-        # where the step choice reads each level in System.y, and its gap (m): x1, x2, v1, v2, a1,
-        # a2 of the floors, the contact's F and delta (plain ints: item() on a few scalars per
-        # level is cheaper than numpy calls on arrays of a few levels, measured for 1 and 8)
-        self._level_reads = [(lv.ix1, lv.ix2, lv.iv1, lv.iv2, lv.ia1, lv.ia2, lv.i_F, lv.i_delta, lv.gap)
-                             for lv in self.levels]
         # a closure predicted later than this (s) changes neither the step (at most h_max) nor the
         # saving of states (a closure within risk_factor steps): _plan skips its time scales
         self._far = 2.0 * max(1.0, self.risk_factor) * self.h_max
@@ -308,15 +303,16 @@ class Adaptive(CouplingStrategy):
         return level
 
     def _levels_now(self) -> tuple[list, list]:
-        """Each level's kinematics ``(delta, rate, its rate)`` now (:meth:`_Level.kinematics`,
-        the same arithmetic) and whether its contact has something to do: a force, a closed
-        gap (its own, or the host's)."""
-        item = self.system.y.item
+        """Each level's kinematics ``(delta, rate, its rate)`` now (:meth:`_Level.kinematics`)
+        and whether its contact has something to do: a force, a closed gap (its own, or the
+        host's).  One loop over the levels, each read once per try."""
+        y = self.system.y
+        item = y.item
         kinematics, active = [], []
-        for x1, x2, v1, v2, a1, a2, i_F, i_delta, gap in self._level_reads:
-            d = item(x1) - item(x2) - gap
-            kinematics.append((d, item(v1) - item(v2), item(a1) - item(a2)))
-            active.append(item(i_F) != 0.0 or item(i_delta) >= 0.0 or d >= 0.0)
+        for lv in self.levels:
+            k = lv.kinematics(y)
+            kinematics.append(k)
+            active.append(item(lv.i_F) != 0.0 or item(lv.i_delta) >= 0.0 or k[0] >= 0.0)
         return kinematics, active
 
     def _plan(self) -> tuple[float, bool]:
@@ -549,15 +545,15 @@ class Adaptive(CouplingStrategy):
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
         longer than that contact's contact step, else None."""
-        item = self.system.y.item
+        y = self.system.y
         retry = None
-        for lv, (d0, dd0, _), (x1, x2, v1, v2, *_, gap) in zip(self.levels, start, self._level_reads):
+        for lv, (d0, dd0, _) in zip(self.levels, start):
             if d0 > 0.0:
                 continue
-            d1 = item(x1) - item(x2) - gap
+            d1, dd1, _ = lv.kinematics(y)
             if d1 <= 0.0:
                 continue
-            v = max(dd0, item(v1) - item(v2))
+            v = max(dd0, dd1)
             h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
             if h <= h_contact * (1.0 + 1e-9) or h <= self.h_min * (1.0 + 1e-9):
                 continue
