@@ -588,17 +588,16 @@ def _building_summary(result: SimulationResult, name: str, n: int,
     d, d_in_step = _peaks(result, name, "drift", n)
     a, _ = _peaks(result, name, "a", n)
     base_shear = _peak(result, column(name, "base_shear"))
-    if d_in_step and storeys_are_linear(spec):
-        # a linear storey's shear is k1 d1: its peak is k1 times the in-step peak drift (the
-        # step ends alone miss it between them: -13 % on kobe's left building with long steps)
+    # the step ends alone miss the peak between them (-13 % on kobe's left building, -1 % on
+    # default_inelastic's, with long steps): building.fmu's running peak of |V[1]| inside the
+    # steps (V_peak: k1 drift_peak[1] for linear storeys, located for yielding ones); a history
+    # without it (older runs, other building FMUs) has, for linear storeys, k1 times the
+    # in-step peak drift (V[1] = k1 drift[1]), for yielding ones the step ends' peak
+    shear_peak = _in_step_peaks(result, name, "V_peak", 1)
+    if shear_peak is not None:
+        base_shear = max(base_shear, float(shear_peak[0]))
+    elif d_in_step and storeys_are_linear(spec):
         base_shear = max(base_shear, shear_building(spec).stiffnesses[0] * float(d[0]))
-    else:
-        # yielding storeys: the FMU's running peak of |V[1]| inside the steps (building.fmu's
-        # V_peak; the step ends alone missed 1 % of default_inelastic's with long steps); a
-        # history without it (older runs, other building FMUs) keeps the step ends' peak
-        shear_peak = _in_step_peaks(result, name, "V_peak", 1)
-        if shear_peak is not None:
-            base_shear = max(base_shear, float(shear_peak[0]))
     for floor, value in (spikes or {}).items():   # the contacts' instantaneous peak forces
         a[floor - 1] = max(a[floor - 1], value)
     heights = []
