@@ -8,6 +8,7 @@ FMI); the argument why it converges and cannot create energy is in ``docs/fmi_ho
 """
 from __future__ import annotations
 
+import copy
 import math
 from types import MappingProxyType
 
@@ -125,7 +126,8 @@ class HostObserver:
       feedback, until the edge is decided.  The hand-over is timed meanwhile for the latest
       standard host the rows do not exclude (:meth:`_identify`).
 
-    Plain numbers and tuples only: ``copy.deepcopy`` saves it with the FMU state.
+    Plain numbers and tuples only, besides the list of notices: :meth:`snapshot` saves it with
+    the FMU state.
     """
 
     def __init__(self, m: float, extrapolate: bool = True, host: str = "any"):
@@ -172,6 +174,15 @@ class HostObserver:
         #: standard kernels the current edge's rows do not exclude (all of them before any row)
         self.plausible = _STANDARD_KERNELS
         self.notices = []           # messages for the FMU log (drained by the adapter)
+
+    def snapshot(self) -> "HostObserver":
+        """A copy as independent as ``copy.deepcopy`` gives, for an FMU state: every attribute is a
+        number, a bool, None or a tuple of them, except the list of notices, copied
+        (tests/test_contact_snapshots.py walks both).  A deep copy cost 60 us of the 80 us of a
+        pounding.fmu fmi2GetFMUstate, which a rolling-back master pays for every contact."""
+        new = copy.copy(self)
+        new.notices = list(self.notices)
+        return new
 
     def _set_kernel(self, kernel) -> None:
         self.kernel = kernel

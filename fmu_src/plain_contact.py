@@ -4,6 +4,7 @@ Pure physics (SI units, no FMI); the comparison to the in-step resolver (:mod:`.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 from .contact_laws import ContactLaw
@@ -14,7 +15,8 @@ class PlainContact:
     ``v_imp`` is latched when a contact begins (``|delta_dot|`` at the first step found in
     contact).  The host applies the returned force over the whole step, so the work done on
     the contact in a step is ``F (delta_new - delta_old)``; the dissipated energy is that
-    work minus the energy stored in the spring.
+    work minus the energy stored in the spring.  Plain numbers besides the law (frozen):
+    :meth:`snapshot` saves it with the FMU state.
     """
 
     def __init__(self, law: ContactLaw, graze_depth: float = 0.0):
@@ -40,6 +42,10 @@ class PlainContact:
         self.last_CR = math.nan     # -delta_dot / v_imp at the first inputs found out of contact
         self.last_E = 0.0           # J, dissipated by the latest completed contact
         self._E_at_onset = 0.0
+
+    def snapshot(self) -> "PlainContact":
+        """A copy for an FMU state (a shallow one is as independent as a deep one: see above)."""
+        return copy.copy(self)
 
     def step(self, delta: float, delta_dot: float, h: float, gap_open: bool = False) -> float:
         """Force [N] for the step of length ``h`` [s] starting at the given inputs.

@@ -7,6 +7,8 @@ no FMI): the adapter logs the findings or refuses the step (``on_implausible``).
 """
 from __future__ import annotations
 
+import copy
+
 from .contact_laws import ContactLaw
 from .plain_contact import PlainContact
 
@@ -42,7 +44,8 @@ class PlausibilityWatch:
       ``MULTIPLYING_STEPS`` steps of the previous separation at more than
       ``MULTIPLYING_SPEED`` of its approach speed.
 
-    Each finding names the numbers and the remedy.  Plain numbers only (saved with the FMU state).
+    Each finding names the numbers and the remedy.  Plain numbers and tuples only, besides the
+    law (frozen): :meth:`snapshot` saves it with the FMU state.
     """
 
     def __init__(self, law: ContactLaw):
@@ -52,6 +55,10 @@ class PlausibilityWatch:
         self.steps_open = 0         # steps since the last separation
         self.last_speed = 0.0       # m/s, approach speed of the previous impact
         self.in_a_row = 0           # multiplying impacts in a row
+
+    def snapshot(self) -> "PlausibilityWatch":
+        """A copy for an FMU state (a shallow one is as independent as a deep one: see above)."""
+        return copy.copy(self)
 
     def check(self, contact, h: float) -> list[tuple[str, str]]:
         """(kind, message) of what is new after a step of ``h`` [s] of ``contact``."""

@@ -18,8 +18,6 @@ See docs/contact_models.md for the models and the in-step rules.
 """
 from __future__ import annotations
 
-import copy
-
 from pythonfmu.enums import Fmi2Status
 
 from .contact_laws import MODELS, law_for
@@ -163,7 +161,7 @@ class Pounding(Fmi2Slave):
         declared = bool(self.gap_open)
         self._check_declaration(current_time, delta, declared)
         discard = self.on_implausible == "discard"
-        saved = copy.deepcopy((self._contact, self._watch, self._declared_from)) if discard else None
+        saved = (self._contact.snapshot(), self._watch.snapshot(), self._declared_from) if discard else None
         self._declared_from = current_time if declared else None
         c = self._contact
         started = c.started
