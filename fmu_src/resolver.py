@@ -655,7 +655,7 @@ class ImpactResolver:
             self._finish(d, u, L, v)
             out.impacts_completed += 1
             return t
-        fs, p = f(d, u)
+        fs = f(d, u)[0]
         acc = al0 - fs
         nfev = 1
         base = self.impact_time / T               # scaled contact time at the step start
@@ -676,13 +676,14 @@ class ImpactResolver:
                 if self.sticking:
                     break
                 f = self._kernels[self.approaching]
-                fs, p = f(d, 0.0)
+                fs = f(d, 0.0)[0]
                 acc = al0 + al1 * tau - fs
                 continue
             hs = min(dtau, tau_end - tau)
             last = hs >= tau_end - tau
             al_t = al0 + al1 * tau
-            d1, u1, acc1, f1, p1, de, err = self._dp_step(f, al_t, al1, d, u, acc, p, hs, atol, rtol)
+            stepped = self._dp_step(f, al_t, al1, d, u, acc, hs, atol, rtol)
+            d1, u1, acc1, f1, err = stepped
             nfev += 6
             if err > 1.0:
                 dtau = hs * max(0.2, 0.9 * err ** -0.2)
@@ -697,11 +698,11 @@ class ImpactResolver:
                     event = "separation"
                 if u1 > _REAPPROACH_RATE and switches < _MAX_SWITCHES_PER_STEP:
                     event = "reapproach" if event is None else self._first_event(
-                        f, al_t, al1, d, u, acc, p, hs, atol, rtol)
+                        f, al_t, al1, d, u, acc, hs, stepped, atol, rtol)
             if event is not None:
                 switches += 1
                 g = self._event_function(event)
-                hs, d1, u1, _, _, _, _, n_ev = self._locate(f, al_t, al1, d, u, acc, p, hs, g, atol, rtol)
+                hs, d1, u1, _, _, n_ev = self._locate(f, al_t, al1, d, u, acc, hs, stepped, g, atol, rtol)
                 nfev += n_ev
                 tau += hs
                 e += self._dissipated(d, u, d1, u1, al_t, al1, hs)
@@ -725,7 +726,7 @@ class ImpactResolver:
                 if self.sticking:
                     continue
                 f = self._kernels[self.approaching]
-                fs, p = f(d, u)
+                fs = f(d, u)[0]
                 acc = al0 + al1 * tau - fs
                 nfev += 1 + self._sample(base + tau, fs, d, u, acc, al0 + al1 * tau, al1, self.approaching,
                                          out, F0)
@@ -734,7 +735,7 @@ class ImpactResolver:
             tau += hs
             e += self._dissipated(d, u, d1, u1, al_t, al1, hs)
             e_top = e - margin if e - margin > e_top else e_top
-            d, u, acc, p = d1, u1, acc1, p1
+            d, u, acc = d1, u1, acc1
             nfev += self._sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0)
             if not last:
                 dtau = hs * min(5.0, 0.9 * max(err, 1e-10) ** -0.2)
@@ -821,10 +822,11 @@ class ImpactResolver:
             return lambda dd, uu: _REAPPROACH_RATE - uu
         return self._separation
 
-    def _first_event(self, f, al_t, al1, d, u, acc, p, hs, atol, rtol) -> str:
-        """Separation and re-approach both inside one step: the one located first."""
-        t_sep = self._locate(f, al_t, al1, d, u, acc, p, hs, self._separation, atol, rtol)[0]
-        t_re = self._locate(f, al_t, al1, d, u, acc, p, hs, self._event_function("reapproach"), atol, rtol)[0]
+    def _first_event(self, f, al_t, al1, d, u, acc, hs, stepped, atol, rtol) -> str:
+        """Separation and re-approach both inside one step (``stepped``: its DP step): the one
+        located first."""
+        t_sep = self._locate(f, al_t, al1, d, u, acc, hs, stepped, self._separation, atol, rtol)[0]
+        t_re = self._locate(f, al_t, al1, d, u, acc, hs, stepped, self._event_function("reapproach"), atol, rtol)[0]
         return "separation" if t_sep <= t_re else "reapproach"
 
     def _sample(self, tau, fs, d, u, acc, al, al1, approaching, out, F0, branch_end=False) -> int:
@@ -869,60 +871,61 @@ class ImpactResolver:
         rtol = self.rtol
 
         def minus_force(x):
-            dx, ux = self._dp_step(f, al, al1, d, u, acc, 0.0, x, rtol, rtol)[:2]
+            dx, ux = self._dp_step(f, al, al1, d, u, acc, x, rtol, rtol)[:2]
             return -f(dx, ux)[0]
 
         lowest, calls = bounded_minimum(minus_force, span, 1e-7 * span)
         return -lowest, 6 * calls
 
     @staticmethod
-    def _dp_step(f, al, al1, d, u, a1, p1, hs, atol, rtol):
-        """One Dormand-Prince step of ``d' = u, u' = al + al1 s - f(d, u)`` with the dissipated
-        energy ``e' = power``; returns (d, u, u', force, power, e increment, error norm)."""
-        # stage states (d_i, u_i) and derivatives (u_i, a_i); p_i dissipative power
-        d2 = d + hs * _A21 * u
-        u2 = u + hs * _A21 * a1
-        f2, _ = f(d2, u2)
+    def _dp_step(f, al, al1, d, u, a1, hs, atol, rtol):
+        """One Dormand-Prince step of ``d' = u, u' = al + al1 s - f(d, u)``; returns (d, u, u',
+        force, error norm).  The dissipated energy is booked from the step's ends
+        (:meth:`_dissipated`), not integrated here: the kernels' power is not used."""
+        # stage states (d_i, u_i) and derivatives (u_i, a_i); hs * _A21 * x is (hs * _A21) * x
+        h21 = hs * _A21
+        d2 = d + h21 * u
+        u2 = u + h21 * a1
+        f2 = f(d2, u2)[0]
         a2 = al + al1 * _C2 * hs - f2
         d3 = d + hs * (_A31 * u + _A32 * u2)
         u3 = u + hs * (_A31 * a1 + _A32 * a2)
-        f3, p3 = f(d3, u3)
+        f3 = f(d3, u3)[0]
         a3 = al + al1 * _C3 * hs - f3
         d4 = d + hs * (_A41 * u + _A42 * u2 + _A43 * u3)
         u4 = u + hs * (_A41 * a1 + _A42 * a2 + _A43 * a3)
-        f4, p4 = f(d4, u4)
+        f4 = f(d4, u4)[0]
         a4 = al + al1 * _C4 * hs - f4
         d5 = d + hs * (_A51 * u + _A52 * u2 + _A53 * u3 + _A54 * u4)
         u5 = u + hs * (_A51 * a1 + _A52 * a2 + _A53 * a3 + _A54 * a4)
-        f5, p5 = f(d5, u5)
+        f5 = f(d5, u5)[0]
         a5 = al + al1 * _C5 * hs - f5
         d6 = d + hs * (_A61 * u + _A62 * u2 + _A63 * u3 + _A64 * u4 + _A65 * u5)
         u6 = u + hs * (_A61 * a1 + _A62 * a2 + _A63 * a3 + _A64 * a4 + _A65 * a5)
-        f6, p6 = f(d6, u6)
+        f6 = f(d6, u6)[0]
         a6 = al + al1 * hs - f6
         dn = d + hs * (_B1 * u + _B3 * u3 + _B4 * u4 + _B5 * u5 + _B6 * u6)
         un = u + hs * (_B1 * a1 + _B3 * a3 + _B4 * a4 + _B5 * a5 + _B6 * a6)
-        fn, pn = f(dn, un)
+        fn = f(dn, un)[0]
         an = al + al1 * hs - fn
-        de = hs * (_B1 * p1 + _B3 * p3 + _B4 * p4 + _B5 * p5 + _B6 * p6)
         ed = hs * (_E1 * u + _E3 * u3 + _E4 * u4 + _E5 * u5 + _E6 * u6 + _E7 * un)
         eu = hs * (_E1 * a1 + _E3 * a3 + _E4 * a4 + _E5 * a5 + _E6 * a6 + _E7 * an)
         sd = atol + rtol * max(abs(d), abs(dn))
         su = atol + rtol * max(abs(u), abs(un))
         err = max(abs(ed) / sd, abs(eu) / su)
-        return dn, un, an, fn, pn, de, err
+        return dn, un, an, fn, err
 
-    def _locate(self, f, al, al1, d, u, acc, p, hs, g, atol, rtol):
-        """Step length in (0, hs] where ``g`` of the DP step's end state reaches 0 (Illinois).
+    def _locate(self, f, al, al1, d, u, acc, hs, stepped, g, atol, rtol):
+        """Step length in (0, hs] where ``g`` of the DP step's end state reaches 0 (Illinois);
+        ``stepped``: the DP step of length ``hs`` itself, already taken.
 
-        Returns (length, d, u, u', force, power, e increment, force evaluations).
+        Returns (length, d, u, u', force, force evaluations).
         """
         a, ga = 0.0, g(d, u)
         b = hs
-        best = self._dp_step(f, al, al1, d, u, acc, p, b, atol, rtol)
-        gb = g(best[0], best[1])
-        best = (b,) + best[:6]
-        nfev = 6
+        gb = g(stepped[0], stepped[1])
+        best = (b,) + stepped[:4]
+        nfev = 0
         side = 0
         for _ in range(60):
             if gb == 0.0 or (b - a) <= 1e-14 * max(hs, 1e-300):
@@ -930,7 +933,7 @@ class ImpactResolver:
             c = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
             if not (a < c < b):
                 c = 0.5 * (a + b)
-            step = self._dp_step(f, al, al1, d, u, acc, p, c, atol, rtol)
+            step = self._dp_step(f, al, al1, d, u, acc, c, atol, rtol)
             nfev += 6
             gc = g(step[0], step[1])
             if gc > 0.0:
@@ -940,11 +943,11 @@ class ImpactResolver:
                 side = -1
             else:
                 b, gb = c, gc
-                best = (c,) + step[:6]
+                best = (c,) + step[:4]
                 if side == 1:
                     ga *= 0.5
                 side = 1
             if abs(gc) < 1e-15:
-                best = (c,) + step[:6]
+                best = (c,) + step[:4]
                 break
         return best + (nfev,)

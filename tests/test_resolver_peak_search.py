@@ -63,6 +63,6 @@ def test_same_as_scipy_on_the_force_along_a_step(model):
         span = rng.uniform(1e-3, 0.5)
 
         def minus_force(x):
-            dx, ux = r._dp_step(f, al, al1, d, u, acc, 0.0, x, 1e-8, 1e-8)[:2]
+            dx, ux = r._dp_step(f, al, al1, d, u, acc, x, 1e-8, 1e-8)[:2]
             return -f(dx, ux)[0]
         assert bounded_minimum(minus_force, span, 1e-7 * span) == scipy_minimum(minus_force, span, 1e-7 * span)
