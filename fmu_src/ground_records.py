@@ -461,7 +461,36 @@ def _parse_at2(path: Path, text: _Text):
     return np.array(values), dt, units
 
 
+def _plain_column(text: str) -> np.ndarray | None:
+    """The samples of a single-column text with one plain number on every line (no comment,
+    comma, Fortran exponent ``D``, blank line, or anything else), parsed by ``float`` line by line
+    as :func:`_parse_column` parses them; None for any other text, which :func:`_parse_column`
+    then reads (and explains) line by line.  A bundled record took 2 ms to read the careful way,
+    inside a run's measured time (ground_motion.fmu reads its record at initialisation)."""
+    if "#" in text or "," in text or "d" in text or "D" in text:
+        return None
+    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")   # the universal newlines of _Text
+    if lines and lines[-1] == "":
+        lines.pop()                        # the final newline
+    if len(lines) > MAX_RECORD_SAMPLES:
+        return None
+    try:
+        values = np.array([float(line) for line in lines])
+    except ValueError:                     # a blank line, two values, a word: read it carefully
+        return None
+    if values.size and not np.isfinite(values).all():
+        return None
+    return values
+
+
 def _parse_column(path: Path, text: _Text):
+    plain = _plain_column(text.text)
+    return plain if plain is not None else _parse_column_lines(path, text)
+
+
+def _parse_column_lines(path: Path, text: _Text):
+    """A single-column file line by line: comments, commas, blank lines, Fortran exponents, and
+    the line of the first problem."""
     values = []
     for lineno, line in text.lines():
         data = line.split("#", 1)[0].strip()

@@ -378,3 +378,37 @@ def test_scaling_targets_are_exclusive_and_bounded(tmp_path):
     flat.write_text("0\n0\n0\n")
     with pytest.raises(RecordError, match="all samples are zero: cannot scale to a target PSa"):
         load_record(flat, dt=0.01, target_sa=3.0, sa_period=1.0)
+
+
+def test_plain_single_column_read_equals_the_careful_read(tmp_path):
+    """The one-number-per-line fast path (_plain_column) against the line-by-line reader it
+    short-cuts (_parse_column_lines): the same samples bit for bit on every bundled record and
+    on random plain columns in every line ending and spacing; anything else (comments, commas,
+    blank lines, Fortran D exponents, two values on a line, a word, a non-finite value) is left
+    to the careful reader, which still names the file and line of a problem."""
+    from pathlib import Path
+
+    from fmu_src.ground_records import _parse_column, _parse_column_lines, _plain_column, _Text
+
+    for meta in BUNDLED.values():
+        text = _Text(meta.path, meta.path.read_text())
+        plain = _plain_column(text.text)
+        assert plain is not None                           # the bundled files take the fast path
+        careful = _parse_column_lines(meta.path, text)
+        assert plain.dtype == careful.dtype and np.array_equal(plain, careful)
+    rng = np.random.default_rng(5)
+    for trial in range(40):
+        values = rng.normal(0.0, 10.0 ** rng.integers(-6, 3), int(rng.integers(1, 200)))
+        fmt = ["{:.6f}", "{:.17g}", "{:e}", "  {:.9E}\t"][trial % 4]
+        newline = ["\n", "\r\n", "\r"][trial % 3]
+        body = newline.join(fmt.format(v) for v in values) + (newline if trial % 2 else "")
+        plain = _plain_column(body)
+        careful = _parse_column_lines(Path("x.txt"), _Text(Path("x.txt"), body))
+        assert plain is not None and np.array_equal(plain, careful) and plain.size == values.size
+    for body in ("1.0\n# comment\n2.0\n", "1.0,\n2.0\n", "1.0\n\n2.0\n", "1.0D-3\n2.0\n", "1.0 2.0\n3.0\n",
+                 "1.0\nabc\n", "1.0\nnan\n", "inf\n", "1.0\x0c2.0\n"):
+        assert _plain_column(body) is None
+    path = tmp_path / "bad.txt"
+    path.write_text("0.1\n0.2\n0.3 0.4\n")
+    with pytest.raises(RecordError, match=r"bad.txt.*line 3"):
+        _parse_column(path, _Text(path, path.read_text()))
