@@ -234,6 +234,16 @@ class Record:
         out = np.where(x <= 0.0, 0.0, np.where(x >= self.npts - 1, after, inside))
         return float(out) if out.ndim == 0 else out
 
+    def over_step(self, t0: float, t1: float) -> tuple[float, float, float, float]:
+        """``(at(t1), mean_over(t0, t1), velocity(t1), displacement(t1))`` for one step ``t1 > t0``
+        (s), each in the arithmetic of its own method (the same doubles), the velocity at ``t1``
+        computed once for the mean and the velocity (ground_motion.fmu's doStep)."""
+        if not t1 > t0:
+            raise ValueError(f"over_step(t0, t1) needs t1 > t0; got t0 = {t0!r}, t1 = {t1!r}")
+        v1 = self._scalar(t1, 1)
+        mean = (v1 - self._scalar(t0, 1)) / (t1 - t0)
+        return self._scalar(t1, 0), mean, v1, self._scalar(t1, 2)
+
     def mean_over(self, t0, t1):
         """Exact mean acceleration (m/s^2) over ``[t0, t1]`` (s); ``at(t0)`` if ``t1 == t0``."""
         if isinstance(t0, (float, int)) and isinstance(t1, (float, int)):

@@ -412,3 +412,19 @@ def test_plain_single_column_read_equals_the_careful_read(tmp_path):
     path.write_text("0.1\n0.2\n0.3 0.4\n")
     with pytest.raises(RecordError, match=r"bad.txt.*line 3"):
         _parse_column(path, _Text(path, path.read_text()))
+
+
+def test_over_step_equals_the_four_methods_bit_for_bit():
+    """ground_motion.fmu's doStep values (Record.over_step) are the doubles of at, mean_over,
+    velocity and displacement, before, inside and after the record, on and between samples."""
+    rec = load_record("kobe1995", target_pga_g=0.4, time_shift=0.7)
+    rng = np.random.default_rng(11)
+    starts = np.concatenate((rng.uniform(-1.0, rec.end_time + 2.0, 3000),
+                             rec.start_time + rec.dt * rng.integers(-5, rec.npts + 5, 500)))
+    for t0 in starts:
+        t0 = float(t0)
+        h = float(rng.choice([1e-3, 0.01, 0.02, 0.32, rng.uniform(1e-9, 1.0)]))
+        t1 = t0 + h
+        assert rec.over_step(t0, t1) == (rec.at(t1), rec.mean_over(t0, t1), rec.velocity(t1), rec.displacement(t1))
+    with pytest.raises(ValueError, match="t1 > t0"):
+        rec.over_step(1.0, 1.0)
