@@ -910,10 +910,14 @@ class ImpactResolver:
         an = al + al1 * hs - fn
         ed = hs * (_E1 * u + _E3 * u3 + _E4 * u4 + _E5 * u5 + _E6 * u6 + _E7 * un)
         eu = hs * (_E1 * a1 + _E3 * a3 + _E4 * a4 + _E5 * a5 + _E6 * a6 + _E7 * an)
-        sd = atol + rtol * max(abs(d), abs(dn))
-        su = atol + rtol * max(abs(u), abs(un))
-        err = max(abs(ed) / sd, abs(eu) / su)
-        return dn, un, an, fn, err
+        # max(abs(a), abs(b)) written out (the same values: max keeps its first argument unless
+        # the second is larger): two builtin calls fewer per norm, a tenth of the step's cost
+        a, b = (d if d >= 0.0 else -d), (dn if dn >= 0.0 else -dn)
+        sd = atol + rtol * (b if b > a else a)
+        a, b = (u if u >= 0.0 else -u), (un if un >= 0.0 else -un)
+        su = atol + rtol * (b if b > a else a)
+        a, b = (ed if ed >= 0.0 else -ed) / sd, (eu if eu >= 0.0 else -eu) / su
+        return dn, un, an, fn, (b if b > a else a)
 
     def _locate(self, f, al, al1, d, u, acc, hs, stepped, g, atol, rtol):
         """Step length in (0, hs] where ``g`` of the DP step's end state reaches 0 (Illinois);
