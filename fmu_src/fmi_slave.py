@@ -658,6 +658,10 @@ class SlaveBase(Fmi2Slave):
 
     def _step_problem(self, t: float, h: float) -> str | None:
         """Why a doStep(t, h) is refused, or None: the allowed step sizes and times."""
+        # the usual step first: where the last one ended (so t is finite) and h within every
+        # bound below (comparisons with NaN fail); the same verdict as the full checks, cheaper
+        if t == self._t_next and MIN_STEP <= h <= MAX_STEP and h >= TIME_RESOLUTION * (t if t >= 0.0 else -t):
+            return None
         if not math.isfinite(t):
             return f"communication point t = {t!r} s is not finite"
         floor = max(MIN_STEP, TIME_RESOLUTION * abs(t))
