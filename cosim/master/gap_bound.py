@@ -403,17 +403,34 @@ class _LinearPair:
         self.reads = np.concatenate((gaps._reads[left], gaps._reads[right]))
         self.w = np.concatenate((bl.w, br.w))
         self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
-        self.q, self.qd, self.rate = np.empty(n), np.empty(n), np.empty(n)
         m = fl.size
         self.m = m
         # the levels' floors in the stacked rows: views where they are evenly spaced (no copy)
         self.rows_l, self.rows_r = _as_slice(fl), _as_slice(bl.n + fr)
+        # buffers every proof writes into, and the views of them it reads (made once: a view
+        # costs about as much as a small numpy operation)
+        nl, nr2 = self.nl, 2 * self.nl
+        self._reads = np.empty(self.reads.size)
+        r = self._reads
+        self._reads_parts = (r[:nl], r[nl:nr2], r[nr2:nr2 + br.n], r[nr2 + br.n:])
+        self.q, self.qd, self.rate, self._b, self._speed, self._square = (np.empty(n) for _ in range(6))
+        self._q_parts = (self.q[:nl], self.q[nl:])
+        self._qd_parts = (self.qd[:nl], self.qd[nl:])
+        self._speed_parts = (self._speed[:nl], self._speed[nl:])
+        self._rate_parts = (self.rate[:nl], self.rate[nl:])
+        self._half_rate = np.empty((m, 1))  # 0.5 (rate_l + rate_r) of each level, as a column
+        self._Q, self._Q_part = np.empty((n, GRID + 1)), np.empty((n, GRID + 1))
+        self._delta = np.empty((m, GRID + 1))
+        self._delta_ends = (self._delta[:, :-1], self._delta[:, 1:], self._delta[:, 0])
+        self._forced = np.empty((2 * m, GRID))
+        self._forced_parts = (self._forced[:m], self._forced[m:])
         self.answer = np.empty((m, GRID + 2))
         self.answer[:, -1] = 1.0
+        self._upper, self._answer_now = self.answer[:, 1:-1], self.answer[:, 0]
         self.bad = np.empty((m, GRID + 2), dtype=bool)
         self._by_h: dict = {}           # H -> (stacked Ac, stacked As, stacked ground rows of the levels)
         self._key = None                # the reads (bytes) of the state below
-        self._modal = None              # (q, q' + zeta w q) as stacked columns
+        self._modal = (self.q[:, None], self._b[:, None])   # (q, q' + zeta w q) as stacked columns
         self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
@@ -429,27 +446,36 @@ class _LinearPair:
     def _state(self, y: np.ndarray) -> None:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
         free rate bound (``|phi| @ speed``, as :class:`FloorMotion`), if the reads changed."""
-        reads = y[self.reads]
+        reads = self._reads
+        np.take(y, self.reads, out=reads)
         key = reads.tobytes()
         if key == self._key:
             return
-        (bl, br), nl = self.bounds, self.nl
-        q, qd = self.q, self.qd
-        nr2 = 2 * nl
-        np.matmul(bl.to_modal, reads[:nl], out=q[:nl])
-        np.matmul(bl.to_modal, reads[nl:nr2], out=qd[:nl])
-        nb = br.n
-        np.matmul(br.to_modal, reads[nr2:nr2 + nb], out=q[nl:])
-        np.matmul(br.to_modal, reads[nr2 + nb:], out=qd[nl:])
-        b = self.zeta_w * q
+        bl, br = self.bounds
+        q, qd, b, speed = self.q, self.qd, self._b, self._speed
+        u_l, v_l, u_r, v_r = self._reads_parts
+        q_l, q_r = self._q_parts
+        qd_l, qd_r = self._qd_parts
+        np.matmul(bl.to_modal, u_l, out=q_l)
+        np.matmul(bl.to_modal, v_l, out=qd_l)
+        np.matmul(br.to_modal, u_r, out=q_r)
+        np.matmul(br.to_modal, v_r, out=qd_r)
+        np.multiply(self.zeta_w, q, out=b)
         b += qd
-        speed = self.w * q
-        speed **= 2
-        speed += qd * qd
+        np.multiply(self.w, q, out=speed)
+        np.square(speed, out=speed)
+        square = self._square
+        np.multiply(qd, qd, out=square)
+        speed += square
         np.sqrt(speed, out=speed)
-        np.matmul(bl.abs_phi, speed[:nl], out=self.rate[:nl])
-        np.matmul(br.abs_phi, speed[nl:], out=self.rate[nl:])
-        self._modal = (q[:, None], b[:, None])
+        rate_l, rate_r = self._rate_parts
+        speed_l, speed_r = self._speed_parts
+        np.matmul(bl.abs_phi, speed_l, out=rate_l)
+        np.matmul(br.abs_phi, speed_r, out=rate_r)
+        # each level's rate slack factor: 0.5 (rate_l + rate_r), times dS per horizon (prove)
+        half = self._half_rate[:, 0]
+        np.add(self.rate[self.rows_l], self.rate[self.rows_r], out=half)
+        half *= 0.5
         self._key = key
         self._free = {}
 
@@ -460,8 +486,11 @@ class _LinearPair:
         free = self._free.get(H)
         if free is None:
             q, b = self._modal
-            Q = Ac * q
-            Q += As * b
+            Q = self._Q
+            np.multiply(Ac, q, out=Q)
+            part = self._Q_part
+            np.multiply(As, b, out=part)
+            Q += part
             (bl, br), nl = self.bounds, self.nl
             free = np.empty(Q.shape)
             np.matmul(bl.phi, Q[:nl], out=free[:nl])
@@ -471,31 +500,32 @@ class _LinearPair:
             self._free[H] = free
         dS = H / GRID
         m = self.m
-        rows_l, rows_r = self.rows_l, self.rows_r
         # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its ends
         # + L dS / 2; forced part at its end (as horizons)
-        delta = free[rows_l] - free[rows_r]
+        delta = self._delta
+        np.subtract(free[self.rows_l], free[self.rows_r], out=delta)
         delta -= self.gap
-        answer = self.answer
-        upper = answer[:, 1:-1]
-        np.add(delta[:, :-1], delta[:, 1:], out=upper)
+        before, after, now = self._delta_ends
+        upper = self._upper
+        np.add(before, after, out=upper)
         upper *= 0.5
-        rate = self.rate[rows_l] + self.rate[rows_r]
-        upper += (0.5 * rate * dS)[:, None]
+        upper += self._half_rate * dS
         # the forced bound of the levels' floors: FloorMotion's ground term (an elementwise
         # product: the levels' rows alone) plus, with a held force, its modal term (a matrix
         # product: every floor's, then the levels')
-        forced = ground_rows * ground[1:]
+        forced = self._forced
+        np.multiply(ground_rows, ground[1:], out=forced)
+        forced_l, forced_r = self._forced_parts
         if forces:
-            for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced[:m]),
-                                              (self.right, self.bounds[1], self.fr, forced[m:])):
+            for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced_l),
+                                              (self.right, self.bounds[1], self.fr, forced_r)):
                 force = forces.get(name)
                 if force is not None and force.any():
                     part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
-        upper += forced[:m]
-        upper += forced[m:]
-        answer[:, 0] = delta[:, 0]
-        np.greater_equal(answer, 0.0, out=self.bad)
+        upper += forced_l
+        upper += forced_r
+        self._answer_now[:] = now
+        np.greater_equal(self.answer, 0.0, out=self.bad)
         for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
             if f:                               # f = 0: closed now (0 s)
                 out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
