@@ -447,7 +447,7 @@ class _LinearPair:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
         free rate bound (``|phi| @ speed``, as :class:`FloorMotion`), if the reads changed."""
         reads = self._reads
-        np.take(y, self.reads, out=reads)
+        y.take(self.reads, out=reads)
         key = reads.tobytes()
         if key == self._key:
             return
