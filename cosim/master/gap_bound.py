@@ -76,6 +76,7 @@ FMU demands, ``z' = 0`` at ``|z| = z_u`` while loading and ``|z|`` falls while u
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Sequence
 
@@ -117,6 +118,10 @@ _POINTS = np.arange(GRID + 1, dtype=float)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
+try:    # np.interp's compiled core, without its Python wrapper (which only dispatches on complex values)
+    from numpy._core.multiarray import interp as _interp
+except ImportError:     # pragma: no cover - numpy < 2
+    _interp = np.interp
 
 
 class ModalBound:
@@ -610,14 +615,23 @@ class ElasticRange:
         return band_horizon(*motion.drifts(), *self.band(centre), H)
 
 
+@functools.lru_cache(maxsize=64)
+def _grid(H: float) -> np.ndarray:
+    """The grid's offsets ``s_k = H k / GRID`` (s), computed once per horizon (read-only: shared)."""
+    grid = H * _POINTS / GRID
+    grid.flags.writeable = False
+    return grid
+
+
 def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
     """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
     must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
-    s = t0 + H * _POINTS / GRID
-    out = np.abs(np.interp(s, times, values))
+    s = t0 + _grid(H)
+    out = _interp(s, times, values)
+    np.abs(out, out=out)
     _MAX.accumulate(out, out=out)
-    lo = times.searchsorted(t0, side="left")
-    hi = times.searchsorted(t0 + H, side="right")
+    lo = times.searchsorted(t0, "left")
+    hi = times.searchsorted(t0 + H, "right")
     if hi > lo:
         # a knot's value counts from the first grid point at or after it: the largest |value|
         # of the knots up to each grid point (a prefix maximum, sampled where each grid point falls)
@@ -626,8 +640,8 @@ def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) 
         _MAX.accumulate(prefix, out=prefix)
         # the grid points at or after the first knot (k > 0 there: k counts the knots at or
         # before each grid point, and grows along the grid)
-        first = s.searchsorted(knots[0], side="left")
-        k = knots.searchsorted(s[first:], side="right")
+        first = s.searchsorted(knots[0], "left")
+        k = knots.searchsorted(s[first:], "right")
         k -= 1
         tail = out[first:]
         _MAX(tail, prefix[k], out=tail)
@@ -900,7 +914,8 @@ class OpenGaps:
                 mid = x[:, :-1] + x[:, 1:]
                 mid *= 0.5
                 slack = (0.5 * dS * rate[floors])[:, None] + forced[floors, 1:]
-                edge = sign * mid + slack
+                # sign * mid + slack, without the product (exact either way: -mid + slack is slack - mid)
+                edge = mid + slack if sign > 0.0 else slack - mid
                 if valid < GRID:
                     edge[:, valid:] = np.inf
                 out = edge if out is None else np.minimum(out, edge)
