@@ -536,6 +536,243 @@ class _LinearPair:
                 out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
 
 
+class _BilinearPair:
+    """The levels between two bilinear buildings with no held force, proven as :meth:`OpenGaps.horizons`
+    does (each building's linear proof about its static shift while its storeys are proven
+    elastic, the gaps' linear proof, then the proof through yielding of the levels it leaves short),
+    with both buildings' elementwise arithmetic stacked (each numpy call costs about a microsecond,
+    whatever its size): the same operations on the same numbers, so the same horizons to the last
+    bit.  The matrix products stay per building, each with the shape :class:`FloorMotion` gives it
+    (OpenBLAS computes a product's rows alike only for some row counts).
+
+    Stacked layout: the left building's floors (or storeys) then the right's (``n = nl + nr``);
+    ``F``, each building's rows ``[floors; storey drifts]`` one after the other (``2 n`` rows)."""
+
+    def __init__(self, gaps: "OpenGaps", left: str, right: str, positions: list, fl: np.ndarray,
+                 fr: np.ndarray, gap: np.ndarray):
+        self.positions, self.gap = positions, gap
+        bl, br = gaps.buildings[left][0], gaps.buildings[right][0]
+        el, er = gaps.elastic[left], gaps.elastic[right]
+        self.bounds, self.yielded = (bl, br), (gaps.yielded[left], gaps.yielded[right])
+        nl, nr = bl.n, br.n
+        n = nl + nr
+        self.nl, self.n = nl, n
+        (_, xl, vl), (_, xr, vr) = gaps.buildings[left], gaps.buildings[right]
+        # one gather: floors' x, then v, then residual drifts, each left then right
+        self.reads = np.concatenate((xl, xr, vl, vr, el.residual, er.residual))
+        self.centre_factor = np.concatenate((np.full(nl, el._centre_factor), np.full(nr, er._centre_factor)))
+        self.yielding_limit = np.concatenate((el._yielding_limit, er._yielding_limit))
+        self.half_width = np.concatenate((el.half_width, er.half_width))
+        self.w = np.concatenate((bl.w, br.w))
+        self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
+        yl, yr = self.yielded
+        self.w_y = np.concatenate((yl.w, yr.w))
+        self.zeta_w_y = np.concatenate((yl.zeta_w, yr.zeta_w))
+        # rows: the levels' floors in F (left, right) and in the stacked floors; every storey drift in F
+        self.fl, self.fr = fl, fr
+        self.F_l, self.F_r = fl, 2 * nl + fr
+        self.S_r = nl + fr
+        self.drift_rows = np.concatenate((np.arange(nl, 2 * nl), np.arange(2 * nl + nr, 2 * n)))
+        self._by_h: dict = {}           # H -> stacked tables
+        self._key = None                # the reads (bytes) of the state below
+        self._state = None
+        self._motion: dict = {}         # H -> the free linear motion of this state
+        self._yielded_state = None      # the modal state of the bounds through yielding (when asked)
+        self._yielded_motion: dict = {}  # H -> their free motion
+
+    def _tables(self, H: float) -> tuple:
+        tables = self._by_h.get(H)
+        if tables is None:
+            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = (b._cached(H) for b in self.bounds)
+            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
+                                      np.vstack((cl[5], cr[5])))
+        return tables
+
+    def _yielded_tables(self, H: float) -> tuple:
+        key = ("yielded", H)
+        tables = self._by_h.get(key)
+        if tables is None:
+            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = (b._cached(H) for b in self.yielded)
+            tables = self._by_h[key] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
+                                        np.vstack((cl[4], cr[4])), np.vstack((cl[6], cr[6])))
+        return tables
+
+    def _read(self, y: np.ndarray) -> None:
+        """The state from the reads (:meth:`OpenGaps._state` of both buildings, stacked)."""
+        reads = y[self.reads]
+        key = reads.tobytes()
+        if key == self._key:
+            return
+        n, nl = self.n, self.nl
+        u, v, r = reads[:n], reads[n:2 * n], reads[2 * n:]
+        shift = np.empty(n)
+        np.cumsum(r[:nl], out=shift[:nl])               # ElasticRange.shift_of, per building
+        np.cumsum(r[nl:], out=shift[nl:])
+        centre = self.centre_factor * r
+        w = u - shift
+        # ElasticRange.yielding: d = D w - centre, |d| >= the limit (D w's first storey is w_0 - 0.0 = w_0)
+        below = np.empty(n)
+        below[1:] = w[:-1]
+        below[0] = below[nl] = 0.0
+        d = w - below
+        d -= centre
+        bad = np.abs(d, out=d) >= self.yielding_limit
+        yielding = (bool(_ANY(bad[:nl])), bool(_ANY(bad[nl:])))
+        (bl, br), q, qd = self.bounds, np.empty(n), np.empty(n)
+        np.matmul(bl.to_modal, w[:nl], out=q[:nl])       # ModalBound.modal_state(w, v), per building
+        np.matmul(bl.to_modal, v[:nl], out=qd[:nl])
+        np.matmul(br.to_modal, w[nl:], out=q[nl:])
+        np.matmul(br.to_modal, v[nl:], out=qd[nl:])
+        b = qd + self.zeta_w * q
+        speed = np.sqrt((self.w * q) ** 2 + qd * qd)
+        rate = np.empty(2 * n)                          # FloorMotion's rows' rate bound, per building
+        np.matmul(bl.abs_rows, speed[:nl], out=rate[:2 * nl])
+        np.matmul(br.abs_rows, speed[nl:], out=rate[2 * nl:])
+        self._state = (yielding, shift, u, v, q[:, None], b[:, None], rate, centre - self.half_width,
+                       centre + self.half_width)
+        self._key = key
+        self._motion = {}
+        self._yielded_state = None
+        self._yielded_motion = {}
+
+    def _linear(self, H: float, ground: np.ndarray) -> tuple:
+        """``(F, forced, (s_left, s_right))``: the linear motion of both buildings about their
+        shifts (:class:`FloorMotion`; the free part kept per state and horizon, the forced part of
+        this ground bound) and how long each provably stays linear (0 while yielding)."""
+        yielding, shift, u, v, q, b, rate, lo, hi = self._state
+        Ac, As, rows_ground = self._tables(H)
+        (bl, br), nl, n = self.bounds, self.nl, self.n
+        F = self._motion.get(H)             # the free motion: this state's, per horizon
+        if F is None:
+            Q = Ac * q
+            Q += As * b
+            F = np.empty((2 * n, GRID + 1))
+            np.matmul(bl.rows, Q[:nl], out=F[:2 * nl])
+            np.matmul(br.rows, Q[nl:], out=F[2 * nl:])
+            if len(self._motion) > 8:
+                self._motion.pop(next(iter(self._motion)))
+            self._motion[H] = F
+        forced = rows_ground * ground
+        # band_horizon of both buildings' storeys at once (each building's answer its own)
+        rows = self.drift_rows
+        D = F[rows]
+        x0 = D[:, 0]
+        inside = _AND(x0 > lo, x0 < hi)
+        dS = H / GRID
+        mid = D[:, :-1] + D[:, 1:]
+        mid *= 0.5
+        slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
+        bad = mid + slack >= hi[:, None]
+        bad |= mid - slack <= lo[:, None]
+        spans = []
+        for part, y_b in ((slice(0, nl), yielding[0]), (slice(nl, n), yielding[1])):
+            if y_b or not _ALL(inside[part]):
+                spans.append(0.0)
+                continue
+            first_bad = _ANY(bad[part], axis=0)
+            first = int(first_bad.argmax())
+            spans.append(float(first) * dS if first_bad[first] else H)
+        return F, forced, tuple(spans)
+
+    def _through(self, H: float, ground: np.ndarray) -> tuple:
+        """``(free, forced, rate)`` of both buildings' floors through yielding
+        (:meth:`ModalBound.through_yielding`, from the floors' x and v)."""
+        (yl, yr), nl, n = self.yielded, self.nl, self.n
+        if self._yielded_state is None:
+            _, _, u, v, *_ = self._state
+            q, qd = np.empty(n), np.empty(n)
+            np.matmul(yl.to_modal, u[:nl], out=q[:nl])
+            np.matmul(yl.to_modal, v[:nl], out=qd[:nl])
+            np.matmul(yr.to_modal, u[nl:], out=q[nl:])
+            np.matmul(yr.to_modal, v[nl:], out=qd[nl:])
+            b = qd + self.zeta_w_y * q
+            speed = np.sqrt((self.w_y * q) ** 2 + qd * qd)
+            rate = np.empty(n)
+            np.matmul(yl.abs_phi, speed[:nl], out=rate[:nl])
+            np.matmul(yr.abs_phi, speed[nl:], out=rate[nl:])
+            self._yielded_state = (q[:, None], b[:, None], rate)
+        q, b, rate = self._yielded_state
+        Ac, As, floors_ground, plastic = self._yielded_tables(H)
+        free = self._yielded_motion.get(H)  # the free motion: this state's, per horizon
+        if free is None:
+            Q = Ac * q
+            Q += As * b
+            free = np.empty((n, GRID + 1))
+            np.matmul(yl.phi, Q[:nl], out=free[:nl])
+            np.matmul(yr.phi, Q[nl:], out=free[nl:])
+            if len(self._yielded_motion) > 8:
+                self._yielded_motion.pop(next(iter(self._yielded_motion)))
+            self._yielded_motion[H] = free
+        forced = floors_ground * ground
+        forced = forced + plastic
+        return free, forced, rate
+
+    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, out: list) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+        self._read(y)
+        yielding, shift, _, _, _, _, rate, _, _ = self._state
+        dS = H / GRID
+        positions = self.positions
+        F, forced, (s_l, s_r) = (None, None, (0.0, 0.0)) if yielding[0] and yielding[1] else self._linear(H, ground)
+        if s_l != 0.0 and s_r != 0.0:
+            s = min(s_l, s_r)
+            fl, Fl, Fr, Sr = self.fl, self.F_l, self.F_r, self.S_r
+            xl = F[Fl] + shift[fl][:, None]
+            xr = F[Fr] + shift[Sr][:, None]
+            delta = xl - xr - self.gap
+            upper = delta[:, :-1] + delta[:, 1:]
+            upper *= 0.5
+            upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
+            upper += forced[Fl, 1:]
+            upper += forced[Fr, 1:]
+            bad = upper >= 0.0
+            first = bad.argmax(axis=1).tolist()
+            hit = _ANY(bad, axis=1).tolist()
+            closed = (delta[:, 0] >= 0.0).tolist()
+            for pos, c, f, h in zip(positions, closed, first, hit):
+                if not c:
+                    out[pos] = min(s, float(f) * dS if h else H)
+        short = [i for i, pos in enumerate(positions) if out[pos] < H]
+        if not short:
+            return
+        # through yielding (OpenGaps._through_yielding): each floor's envelope, the tighter of its
+        # linear bound (over the intervals its building provably stays linear) and its bound
+        # through yielding (any time)
+        free_y, forced_y, rate_y = self._through(H, ground)
+        nl = self.nl
+        fl, fr = self.fl[short], self.fr[short]
+        half = 0.5 * dS
+        envelopes = []
+        for sign, rows_y, s_b, rows_F, rows_S in ((1.0, fl, s_l, fl, fl),
+                                                   (-1.0, nl + fr, s_r, 2 * nl + fr, nl + fr)):
+            edges = []
+            if s_b > 0.0:               # the linear bound's intervals: those ending by s_b
+                x = F[rows_F] + shift[rows_S][:, None]
+                edges.append((x, forced[rows_F, 1:], rate[rows_F], int(round(s_b / dS))))
+            edges.append((free_y[rows_y], forced_y[rows_y, 1:], rate_y[rows_y], GRID))
+            env = None
+            for x, f_end, r, valid in edges:
+                mid = x[:, :-1] + x[:, 1:]
+                mid *= 0.5
+                slack = (half * r)[:, None] + f_end
+                edge = mid + slack if sign > 0.0 else slack - mid
+                if valid < GRID:
+                    edge[:, valid:] = np.inf
+                env = edge if env is None else np.minimum(env, edge)
+            envelopes.append(env)
+        up, lo = envelopes[0], -envelopes[1]
+        bad = up - lo - self.gap[short] >= 0.0
+        first = bad.argmax(axis=1).tolist()
+        hit = _ANY(bad, axis=1).tolist()
+        for i, f, h in zip(short, first, hit):
+            pos = positions[i]
+            out[pos] = max(out[pos], float(f) * dS if h else H)
+
+
 def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
                  gap: float, H: float) -> float:
     """Longest ``s <= H`` (s) over which ``delta = u_left - u_right - gap`` provably stays < 0,
@@ -691,8 +928,12 @@ class OpenGaps:
         # every building linear (no elastic range, no bound through yielding): the proof is
         # :meth:`_linear_horizons`, with the per-building and per-pair work it caches below
         self._all_linear = not self.elastic and not self.yielded
-        # which levels (None: all) -> per pair, what the linear proof reuses (:meth:`_linear_plan`)
+        # which levels (None: all) -> per pair, what the linear proof reuses (:meth:`_linear_plan`),
+        # and the stacked proof of two bilinear buildings (:meth:`_bilinear_plan`)
         self._plans: dict = {}
+        #: two bilinear buildings with no held force are proven by :class:`_BilinearPair` (False:
+        #: by the per-building pieces, as its test compares)
+        self.stacked = True
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
@@ -831,7 +1072,11 @@ class OpenGaps:
             return s
 
         yielded = self.yielded
-        for left, right, positions, fl, fr, gap in pairs:
+        fast = self._bilinear_plan(which) if self.stacked else [None] * len(pairs)
+        for k, (left, right, positions, fl, fr, gap) in enumerate(pairs):
+            if fast[k] is not None and left not in forces and right not in forces:
+                fast[k].prove(y, H, ground_bound(), out)     # the same arithmetic, stacked
+                continue
             if prove_linear(left) != 0.0 and prove_linear(right) != 0.0:
                 s = min(linear[left], linear[right])
                 xl, bl, ll = motions[left].floors()
@@ -868,6 +1113,20 @@ class OpenGaps:
         if plan is not None:
             return plan
         plan = [_LinearPair(self, *pair) for pair in self._pairs(which)]
+        if len(self._plans) < _PAIRS_KEPT:
+            self._plans[key] = plan
+        return plan
+
+    def _bilinear_plan(self, which: Sequence[int] | None) -> list:
+        """Per pair of :meth:`_pairs`, a :class:`_BilinearPair` where both buildings are bilinear
+        with a bound through yielding (else None), kept per grouping as :meth:`_pairs`."""
+        key = ("bilinear", None if which is None else tuple(which))
+        plan = self._plans.get(key)
+        if plan is not None:
+            return plan
+        stacked = set(self.elastic) & set(self.yielded)
+        plan = [_BilinearPair(self, *pair) if pair[0] in stacked and pair[1] in stacked else None
+                for pair in self._pairs(which)]
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
