@@ -174,9 +174,10 @@ class ModalBound:
         plastic = (1.0 - float(alpha)) * np.asarray(yield_shear, dtype=float) * (1.0 + PLASTIC_MARGIN)
         return cls(building, float(alpha), plastic)
 
-    def _free_tables(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _free_tables(self, s: np.ndarray, impulse_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(Ac, As)`` at the times ``s`` (modes x points): the free motion is ``Ac q0 + As (q0' +
-        zeta w q0)``; ``As`` is each mode's unit impulse response ``h_j(s)``."""
+        zeta w q0)``; ``As`` is each mode's unit impulse response ``h_j(s)`` (``impulse_only``: the
+        underdamped modes' ``Ac`` is not computed, left at 1)."""
         Ac = np.ones((self.n, s.size))
         As = np.tile(s, (self.n, 1))
         # the underdamped modes (every mode of a linear building) at once, one call each for all
@@ -186,7 +187,8 @@ class ModalBound:
             w, z = self.w[under], self.zeta[under]
             decay = np.exp((-z * w)[:, None] * s)
             wd = (w * np.sqrt(1.0 - z * z))[:, None]
-            Ac[under] = decay * np.cos(wd * s)
+            if not impulse_only:
+                Ac[under] = decay * np.cos(wd * s)
             As[under] = decay * np.sin(wd * s) / wd
         for j in range(self.n):
             wj, zj = self.w[j], self.zeta[j]
@@ -266,16 +268,23 @@ class ModalBound:
         ``L``, as at ``t = 0``)."""
         m = GRID * KERNEL_SUBDIVISION
         t = H * np.arange(m + 1, dtype=float) / m
-        K = np.abs(weights @ self._free_tables(t)[1])
+        K = np.abs(weights @ self._free_tables(t, impulse_only=True)[1])
         dt = H / m
         slope = np.abs(weights).sum(axis=1)[:, None]
         pieces = K[:, :-1] + K[:, 1:]
         pieces *= 0.5 * dt
         step = K[:, 1:] - K[:, :-1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # the tent's excess over the chord; >= 0 (|a - b| <= L dt but for round-off); 0 if L = 0
-            excess = np.where(slope > 0.0, (slope * slope * dt * dt - step * step) / (4.0 * slope), 0.0)
-        pieces += np.maximum(excess, 0.0)
+        # the tent's excess over the chord; >= 0 (|a - b| <= L dt but for round-off); 0 if L = 0
+        if _ALL(slope > 0.0):       # every row: the same numbers in place (no 0 / 0 to mask)
+            step *= step
+            np.subtract(slope * slope * dt * dt, step, out=step)
+            step /= 4.0 * slope
+            excess = np.maximum(step, 0.0, out=step)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                excess = np.maximum(np.where(slope > 0.0, (slope * slope * dt * dt - step * step) / (4.0 * slope),
+                                             0.0), 0.0)
+        pieces += excess
         total = np.zeros((weights.shape[0], GRID + 1))
         total[:, 1:] = np.cumsum(pieces, axis=1)[:, KERNEL_SUBDIVISION - 1::KERNEL_SUBDIVISION]
         return total[:self.n], total[self.n:]
