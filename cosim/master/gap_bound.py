@@ -1040,7 +1040,9 @@ class OpenGaps:
         The levels between the same two buildings are proven together (one array operation
         each, as :func:`open_horizon` does for one level, with the same arithmetic).  A level
         of a bilinear building that this linear proof leaves short of ``H`` is proven again
-        through yielding (:meth:`_through_yielding`), and keeps the longer horizon."""
+        through yielding (:meth:`_through_yielding`), and keeps the longer horizon.  Two bilinear
+        buildings with no held force are proven by :class:`_BilinearPair` (the same arithmetic,
+        both buildings stacked), every building linear by :meth:`_linear_horizons`."""
         forces = forces or {}
         if self._all_linear:
             return self._linear_horizons(y, H, ground, forces, which)
