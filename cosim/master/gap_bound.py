@@ -76,6 +76,7 @@ FMU demands, ``z' = 0`` at ``|z| = z_u`` while loading and ``|z|`` falls while u
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Sequence
 
@@ -117,6 +118,10 @@ _POINTS = np.arange(GRID + 1, dtype=float)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
+try:    # np.interp's compiled core, without its Python wrapper (which only dispatches on complex values)
+    from numpy._core.multiarray import interp as _interp
+except ImportError:     # pragma: no cover - numpy < 2
+    _interp = np.interp
 
 
 class ModalBound:
@@ -169,9 +174,10 @@ class ModalBound:
         plastic = (1.0 - float(alpha)) * np.asarray(yield_shear, dtype=float) * (1.0 + PLASTIC_MARGIN)
         return cls(building, float(alpha), plastic)
 
-    def _free_tables(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _free_tables(self, s: np.ndarray, impulse_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(Ac, As)`` at the times ``s`` (modes x points): the free motion is ``Ac q0 + As (q0' +
-        zeta w q0)``; ``As`` is each mode's unit impulse response ``h_j(s)``."""
+        zeta w q0)``; ``As`` is each mode's unit impulse response ``h_j(s)`` (``impulse_only``: the
+        underdamped modes' ``Ac`` is not computed, left at 1)."""
         Ac = np.ones((self.n, s.size))
         As = np.tile(s, (self.n, 1))
         # the underdamped modes (every mode of a linear building) at once, one call each for all
@@ -181,7 +187,8 @@ class ModalBound:
             w, z = self.w[under], self.zeta[under]
             decay = np.exp((-z * w)[:, None] * s)
             wd = (w * np.sqrt(1.0 - z * z))[:, None]
-            Ac[under] = decay * np.cos(wd * s)
+            if not impulse_only:
+                Ac[under] = decay * np.cos(wd * s)
             As[under] = decay * np.sin(wd * s) / wd
         for j in range(self.n):
             wj, zj = self.w[j], self.zeta[j]
@@ -261,16 +268,23 @@ class ModalBound:
         ``L``, as at ``t = 0``)."""
         m = GRID * KERNEL_SUBDIVISION
         t = H * np.arange(m + 1, dtype=float) / m
-        K = np.abs(weights @ self._free_tables(t)[1])
+        K = np.abs(weights @ self._free_tables(t, impulse_only=True)[1])
         dt = H / m
         slope = np.abs(weights).sum(axis=1)[:, None]
         pieces = K[:, :-1] + K[:, 1:]
         pieces *= 0.5 * dt
         step = K[:, 1:] - K[:, :-1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # the tent's excess over the chord; >= 0 (|a - b| <= L dt but for round-off); 0 if L = 0
-            excess = np.where(slope > 0.0, (slope * slope * dt * dt - step * step) / (4.0 * slope), 0.0)
-        pieces += np.maximum(excess, 0.0)
+        # the tent's excess over the chord; >= 0 (|a - b| <= L dt but for round-off); 0 if L = 0
+        if _ALL(slope > 0.0):       # every row: the same numbers in place (no 0 / 0 to mask)
+            step *= step
+            np.subtract(slope * slope * dt * dt, step, out=step)
+            step /= 4.0 * slope
+            excess = np.maximum(step, 0.0, out=step)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                excess = np.maximum(np.where(slope > 0.0, (slope * slope * dt * dt - step * step) / (4.0 * slope),
+                                             0.0), 0.0)
+        pieces += excess
         total = np.zeros((weights.shape[0], GRID + 1))
         total[:, 1:] = np.cumsum(pieces, axis=1)[:, KERNEL_SUBDIVISION - 1::KERNEL_SUBDIVISION]
         return total[:self.n], total[self.n:]
@@ -403,17 +417,34 @@ class _LinearPair:
         self.reads = np.concatenate((gaps._reads[left], gaps._reads[right]))
         self.w = np.concatenate((bl.w, br.w))
         self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
-        self.q, self.qd, self.rate = np.empty(n), np.empty(n), np.empty(n)
         m = fl.size
         self.m = m
         # the levels' floors in the stacked rows: views where they are evenly spaced (no copy)
         self.rows_l, self.rows_r = _as_slice(fl), _as_slice(bl.n + fr)
+        # buffers every proof writes into, and the views of them it reads (made once: a view
+        # costs about as much as a small numpy operation)
+        nl, nr2 = self.nl, 2 * self.nl
+        self._reads = np.empty(self.reads.size)
+        r = self._reads
+        self._reads_parts = (r[:nl], r[nl:nr2], r[nr2:nr2 + br.n], r[nr2 + br.n:])
+        self.q, self.qd, self.rate, self._b, self._speed, self._square = (np.empty(n) for _ in range(6))
+        self._q_parts = (self.q[:nl], self.q[nl:])
+        self._qd_parts = (self.qd[:nl], self.qd[nl:])
+        self._speed_parts = (self._speed[:nl], self._speed[nl:])
+        self._rate_parts = (self.rate[:nl], self.rate[nl:])
+        self._half_rate = np.empty((m, 1))  # 0.5 (rate_l + rate_r) of each level, as a column
+        self._Q, self._Q_part = np.empty((n, GRID + 1)), np.empty((n, GRID + 1))
+        self._delta = np.empty((m, GRID + 1))
+        self._delta_ends = (self._delta[:, :-1], self._delta[:, 1:], self._delta[:, 0])
+        self._forced = np.empty((2 * m, GRID))
+        self._forced_parts = (self._forced[:m], self._forced[m:])
         self.answer = np.empty((m, GRID + 2))
         self.answer[:, -1] = 1.0
+        self._upper, self._answer_now = self.answer[:, 1:-1], self.answer[:, 0]
         self.bad = np.empty((m, GRID + 2), dtype=bool)
         self._by_h: dict = {}           # H -> (stacked Ac, stacked As, stacked ground rows of the levels)
         self._key = None                # the reads (bytes) of the state below
-        self._modal = None              # (q, q' + zeta w q) as stacked columns
+        self._modal = (self.q[:, None], self._b[:, None])   # (q, q' + zeta w q) as stacked columns
         self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
@@ -429,27 +460,36 @@ class _LinearPair:
     def _state(self, y: np.ndarray) -> None:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
         free rate bound (``|phi| @ speed``, as :class:`FloorMotion`), if the reads changed."""
-        reads = y[self.reads]
+        reads = self._reads
+        y.take(self.reads, out=reads)
         key = reads.tobytes()
         if key == self._key:
             return
-        (bl, br), nl = self.bounds, self.nl
-        q, qd = self.q, self.qd
-        nr2 = 2 * nl
-        np.matmul(bl.to_modal, reads[:nl], out=q[:nl])
-        np.matmul(bl.to_modal, reads[nl:nr2], out=qd[:nl])
-        nb = br.n
-        np.matmul(br.to_modal, reads[nr2:nr2 + nb], out=q[nl:])
-        np.matmul(br.to_modal, reads[nr2 + nb:], out=qd[nl:])
-        b = self.zeta_w * q
+        bl, br = self.bounds
+        q, qd, b, speed = self.q, self.qd, self._b, self._speed
+        u_l, v_l, u_r, v_r = self._reads_parts
+        q_l, q_r = self._q_parts
+        qd_l, qd_r = self._qd_parts
+        np.matmul(bl.to_modal, u_l, out=q_l)
+        np.matmul(bl.to_modal, v_l, out=qd_l)
+        np.matmul(br.to_modal, u_r, out=q_r)
+        np.matmul(br.to_modal, v_r, out=qd_r)
+        np.multiply(self.zeta_w, q, out=b)
         b += qd
-        speed = self.w * q
-        speed **= 2
-        speed += qd * qd
+        np.multiply(self.w, q, out=speed)
+        np.square(speed, out=speed)
+        square = self._square
+        np.multiply(qd, qd, out=square)
+        speed += square
         np.sqrt(speed, out=speed)
-        np.matmul(bl.abs_phi, speed[:nl], out=self.rate[:nl])
-        np.matmul(br.abs_phi, speed[nl:], out=self.rate[nl:])
-        self._modal = (q[:, None], b[:, None])
+        rate_l, rate_r = self._rate_parts
+        speed_l, speed_r = self._speed_parts
+        np.matmul(bl.abs_phi, speed_l, out=rate_l)
+        np.matmul(br.abs_phi, speed_r, out=rate_r)
+        # each level's rate slack factor: 0.5 (rate_l + rate_r), times dS per horizon (prove)
+        half = self._half_rate[:, 0]
+        np.add(self.rate[self.rows_l], self.rate[self.rows_r], out=half)
+        half *= 0.5
         self._key = key
         self._free = {}
 
@@ -460,8 +500,11 @@ class _LinearPair:
         free = self._free.get(H)
         if free is None:
             q, b = self._modal
-            Q = Ac * q
-            Q += As * b
+            Q = self._Q
+            np.multiply(Ac, q, out=Q)
+            part = self._Q_part
+            np.multiply(As, b, out=part)
+            Q += part
             (bl, br), nl = self.bounds, self.nl
             free = np.empty(Q.shape)
             np.matmul(bl.phi, Q[:nl], out=free[:nl])
@@ -471,34 +514,272 @@ class _LinearPair:
             self._free[H] = free
         dS = H / GRID
         m = self.m
-        rows_l, rows_r = self.rows_l, self.rows_r
         # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its ends
         # + L dS / 2; forced part at its end (as horizons)
-        delta = free[rows_l] - free[rows_r]
+        delta = self._delta
+        np.subtract(free[self.rows_l], free[self.rows_r], out=delta)
         delta -= self.gap
-        answer = self.answer
-        upper = answer[:, 1:-1]
-        np.add(delta[:, :-1], delta[:, 1:], out=upper)
+        before, after, now = self._delta_ends
+        upper = self._upper
+        np.add(before, after, out=upper)
         upper *= 0.5
-        rate = self.rate[rows_l] + self.rate[rows_r]
-        upper += (0.5 * rate * dS)[:, None]
+        upper += self._half_rate * dS
         # the forced bound of the levels' floors: FloorMotion's ground term (an elementwise
         # product: the levels' rows alone) plus, with a held force, its modal term (a matrix
         # product: every floor's, then the levels')
-        forced = ground_rows * ground[1:]
+        forced = self._forced
+        np.multiply(ground_rows, ground[1:], out=forced)
+        forced_l, forced_r = self._forced_parts
         if forces:
-            for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced[:m]),
-                                              (self.right, self.bounds[1], self.fr, forced[m:])):
+            for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced_l),
+                                              (self.right, self.bounds[1], self.fr, forced_r)):
                 force = forces.get(name)
                 if force is not None and force.any():
                     part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
-        upper += forced[:m]
-        upper += forced[m:]
-        answer[:, 0] = delta[:, 0]
-        np.greater_equal(answer, 0.0, out=self.bad)
+        upper += forced_l
+        upper += forced_r
+        self._answer_now[:] = now
+        np.greater_equal(self.answer, 0.0, out=self.bad)
         for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
             if f:                               # f = 0: closed now (0 s)
                 out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
+
+
+class _BilinearPair:
+    """The levels between two bilinear buildings with no held force, proven as :meth:`OpenGaps.horizons`
+    does (each building's linear proof about its static shift while its storeys are proven
+    elastic, the gaps' linear proof, then the proof through yielding of the levels it leaves short),
+    with both buildings' elementwise arithmetic stacked (each numpy call costs about a microsecond,
+    whatever its size): the same operations on the same numbers, so the same horizons to the last
+    bit.  The matrix products stay per building, each with the shape :class:`FloorMotion` gives it
+    (OpenBLAS computes a product's rows alike only for some row counts).
+
+    Stacked layout: the left building's floors (or storeys) then the right's (``n = nl + nr``);
+    ``F``, each building's rows ``[floors; storey drifts]`` one after the other (``2 n`` rows)."""
+
+    def __init__(self, gaps: "OpenGaps", left: str, right: str, positions: list, fl: np.ndarray,
+                 fr: np.ndarray, gap: np.ndarray):
+        self.positions, self.gap = positions, gap
+        bl, br = gaps.buildings[left][0], gaps.buildings[right][0]
+        el, er = gaps.elastic[left], gaps.elastic[right]
+        self.bounds, self.yielded = (bl, br), (gaps.yielded[left], gaps.yielded[right])
+        nl, nr = bl.n, br.n
+        n = nl + nr
+        self.nl, self.n = nl, n
+        (_, xl, vl), (_, xr, vr) = gaps.buildings[left], gaps.buildings[right]
+        # one gather: floors' x, then v, then residual drifts, each left then right
+        self.reads = np.concatenate((xl, xr, vl, vr, el.residual, er.residual))
+        self.centre_factor = np.concatenate((np.full(nl, el._centre_factor), np.full(nr, er._centre_factor)))
+        self.yielding_limit = np.concatenate((el._yielding_limit, er._yielding_limit))
+        self.half_width = np.concatenate((el.half_width, er.half_width))
+        self.w = np.concatenate((bl.w, br.w))
+        self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
+        yl, yr = self.yielded
+        self.w_y = np.concatenate((yl.w, yr.w))
+        self.zeta_w_y = np.concatenate((yl.zeta_w, yr.zeta_w))
+        # rows: the levels' floors in F (left, right) and in the stacked floors; every storey drift in F
+        self.fl, self.fr = fl, fr
+        self.F_l, self.F_r = fl, 2 * nl + fr
+        self.S_r = nl + fr
+        self.drift_rows = np.concatenate((np.arange(nl, 2 * nl), np.arange(2 * nl + nr, 2 * n)))
+        self._by_h: dict = {}           # H -> stacked tables
+        self._key = None                # the reads (bytes) of the state below
+        self._state = None
+        self._motion: dict = {}         # H -> the free linear motion of this state
+        self._yielded_state = None      # the modal state of the bounds through yielding (when asked)
+        self._yielded_motion: dict = {}  # H -> their free motion
+
+    def _tables(self, H: float) -> tuple:
+        tables = self._by_h.get(H)
+        if tables is None:
+            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = (b._cached(H) for b in self.bounds)
+            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
+                                      np.vstack((cl[5], cr[5])))
+        return tables
+
+    def _yielded_tables(self, H: float) -> tuple:
+        key = ("yielded", H)
+        tables = self._by_h.get(key)
+        if tables is None:
+            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = (b._cached(H) for b in self.yielded)
+            tables = self._by_h[key] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
+                                        np.vstack((cl[4], cr[4])), np.vstack((cl[6], cr[6])))
+        return tables
+
+    def _read(self, y: np.ndarray) -> None:
+        """The state from the reads (:meth:`OpenGaps._state` of both buildings, stacked)."""
+        reads = y[self.reads]
+        key = reads.tobytes()
+        if key == self._key:
+            return
+        n, nl = self.n, self.nl
+        u, v, r = reads[:n], reads[n:2 * n], reads[2 * n:]
+        shift = np.empty(n)
+        np.cumsum(r[:nl], out=shift[:nl])               # ElasticRange.shift_of, per building
+        np.cumsum(r[nl:], out=shift[nl:])
+        centre = self.centre_factor * r
+        w = u - shift
+        # ElasticRange.yielding: d = D w - centre, |d| >= the limit (D w's first storey is w_0 - 0.0 = w_0)
+        below = np.empty(n)
+        below[1:] = w[:-1]
+        below[0] = below[nl] = 0.0
+        d = w - below
+        d -= centre
+        bad = np.abs(d, out=d) >= self.yielding_limit
+        yielding = (bool(_ANY(bad[:nl])), bool(_ANY(bad[nl:])))
+        (bl, br), q, qd = self.bounds, np.empty(n), np.empty(n)
+        np.matmul(bl.to_modal, w[:nl], out=q[:nl])       # ModalBound.modal_state(w, v), per building
+        np.matmul(bl.to_modal, v[:nl], out=qd[:nl])
+        np.matmul(br.to_modal, w[nl:], out=q[nl:])
+        np.matmul(br.to_modal, v[nl:], out=qd[nl:])
+        b = qd + self.zeta_w * q
+        speed = np.sqrt((self.w * q) ** 2 + qd * qd)
+        rate = np.empty(2 * n)                          # FloorMotion's rows' rate bound, per building
+        np.matmul(bl.abs_rows, speed[:nl], out=rate[:2 * nl])
+        np.matmul(br.abs_rows, speed[nl:], out=rate[2 * nl:])
+        self._state = (yielding, shift, u, v, q[:, None], b[:, None], rate, centre - self.half_width,
+                       centre + self.half_width)
+        self._key = key
+        self._motion = {}
+        self._yielded_state = None
+        self._yielded_motion = {}
+
+    def _linear(self, H: float, ground: np.ndarray) -> tuple:
+        """``(F, forced, (s_left, s_right))``: the linear motion of both buildings about their
+        shifts (:class:`FloorMotion`; the free part kept per state and horizon, the forced part of
+        this ground bound) and how long each provably stays linear (0 while yielding)."""
+        yielding, shift, u, v, q, b, rate, lo, hi = self._state
+        Ac, As, rows_ground = self._tables(H)
+        (bl, br), nl, n = self.bounds, self.nl, self.n
+        F = self._motion.get(H)             # the free motion: this state's, per horizon
+        if F is None:
+            Q = Ac * q
+            Q += As * b
+            F = np.empty((2 * n, GRID + 1))
+            np.matmul(bl.rows, Q[:nl], out=F[:2 * nl])
+            np.matmul(br.rows, Q[nl:], out=F[2 * nl:])
+            if len(self._motion) > 8:
+                self._motion.pop(next(iter(self._motion)))
+            self._motion[H] = F
+        forced = rows_ground * ground
+        # band_horizon of both buildings' storeys at once (each building's answer its own)
+        rows = self.drift_rows
+        D = F[rows]
+        x0 = D[:, 0]
+        inside = _AND(x0 > lo, x0 < hi)
+        dS = H / GRID
+        mid = D[:, :-1] + D[:, 1:]
+        mid *= 0.5
+        slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
+        bad = mid + slack >= hi[:, None]
+        bad |= mid - slack <= lo[:, None]
+        spans = []
+        for part, y_b in ((slice(0, nl), yielding[0]), (slice(nl, n), yielding[1])):
+            if y_b or not _ALL(inside[part]):
+                spans.append(0.0)
+                continue
+            first_bad = _ANY(bad[part], axis=0)
+            first = int(first_bad.argmax())
+            spans.append(float(first) * dS if first_bad[first] else H)
+        return F, forced, tuple(spans)
+
+    def _through(self, H: float, ground: np.ndarray) -> tuple:
+        """``(free, forced, rate)`` of both buildings' floors through yielding
+        (:meth:`ModalBound.through_yielding`, from the floors' x and v)."""
+        (yl, yr), nl, n = self.yielded, self.nl, self.n
+        if self._yielded_state is None:
+            _, _, u, v, *_ = self._state
+            q, qd = np.empty(n), np.empty(n)
+            np.matmul(yl.to_modal, u[:nl], out=q[:nl])
+            np.matmul(yl.to_modal, v[:nl], out=qd[:nl])
+            np.matmul(yr.to_modal, u[nl:], out=q[nl:])
+            np.matmul(yr.to_modal, v[nl:], out=qd[nl:])
+            b = qd + self.zeta_w_y * q
+            speed = np.sqrt((self.w_y * q) ** 2 + qd * qd)
+            rate = np.empty(n)
+            np.matmul(yl.abs_phi, speed[:nl], out=rate[:nl])
+            np.matmul(yr.abs_phi, speed[nl:], out=rate[nl:])
+            self._yielded_state = (q[:, None], b[:, None], rate)
+        q, b, rate = self._yielded_state
+        Ac, As, floors_ground, plastic = self._yielded_tables(H)
+        free = self._yielded_motion.get(H)  # the free motion: this state's, per horizon
+        if free is None:
+            Q = Ac * q
+            Q += As * b
+            free = np.empty((n, GRID + 1))
+            np.matmul(yl.phi, Q[:nl], out=free[:nl])
+            np.matmul(yr.phi, Q[nl:], out=free[nl:])
+            if len(self._yielded_motion) > 8:
+                self._yielded_motion.pop(next(iter(self._yielded_motion)))
+            self._yielded_motion[H] = free
+        forced = floors_ground * ground
+        forced = forced + plastic
+        return free, forced, rate
+
+    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, out: list) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+        self._read(y)
+        yielding, shift, _, _, _, _, rate, _, _ = self._state
+        dS = H / GRID
+        positions = self.positions
+        F, forced, (s_l, s_r) = (None, None, (0.0, 0.0)) if yielding[0] and yielding[1] else self._linear(H, ground)
+        if s_l != 0.0 and s_r != 0.0:
+            s = min(s_l, s_r)
+            fl, Fl, Fr, Sr = self.fl, self.F_l, self.F_r, self.S_r
+            xl = F[Fl] + shift[fl][:, None]
+            xr = F[Fr] + shift[Sr][:, None]
+            delta = xl - xr - self.gap
+            upper = delta[:, :-1] + delta[:, 1:]
+            upper *= 0.5
+            upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
+            upper += forced[Fl, 1:]
+            upper += forced[Fr, 1:]
+            bad = upper >= 0.0
+            first = bad.argmax(axis=1).tolist()
+            hit = _ANY(bad, axis=1).tolist()
+            closed = (delta[:, 0] >= 0.0).tolist()
+            for pos, c, f, h in zip(positions, closed, first, hit):
+                if not c:
+                    out[pos] = min(s, float(f) * dS if h else H)
+        short = [i for i, pos in enumerate(positions) if out[pos] < H]
+        if not short:
+            return
+        # through yielding (OpenGaps._through_yielding): each floor's envelope, the tighter of its
+        # linear bound (over the intervals its building provably stays linear) and its bound
+        # through yielding (any time)
+        free_y, forced_y, rate_y = self._through(H, ground)
+        nl = self.nl
+        fl, fr = self.fl[short], self.fr[short]
+        half = 0.5 * dS
+        envelopes = []
+        for sign, rows_y, s_b, rows_F, rows_S in ((1.0, fl, s_l, fl, fl),
+                                                   (-1.0, nl + fr, s_r, 2 * nl + fr, nl + fr)):
+            edges = []
+            if s_b > 0.0:               # the linear bound's intervals: those ending by s_b
+                x = F[rows_F] + shift[rows_S][:, None]
+                edges.append((x, forced[rows_F, 1:], rate[rows_F], int(round(s_b / dS))))
+            edges.append((free_y[rows_y], forced_y[rows_y, 1:], rate_y[rows_y], GRID))
+            env = None
+            for x, f_end, r, valid in edges:
+                mid = x[:, :-1] + x[:, 1:]
+                mid *= 0.5
+                slack = (half * r)[:, None] + f_end
+                edge = mid + slack if sign > 0.0 else slack - mid
+                if valid < GRID:
+                    edge[:, valid:] = np.inf
+                env = edge if env is None else np.minimum(env, edge)
+            envelopes.append(env)
+        up, lo = envelopes[0], -envelopes[1]
+        bad = up - lo - self.gap[short] >= 0.0
+        first = bad.argmax(axis=1).tolist()
+        hit = _ANY(bad, axis=1).tolist()
+        for i, f, h in zip(short, first, hit):
+            pos = positions[i]
+            out[pos] = max(out[pos], float(f) * dS if h else H)
 
 
 def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
@@ -580,14 +861,23 @@ class ElasticRange:
         return band_horizon(*motion.drifts(), *self.band(centre), H)
 
 
+@functools.lru_cache(maxsize=64)
+def _grid(H: float) -> np.ndarray:
+    """The grid's offsets ``s_k = H k / GRID`` (s), computed once per horizon (read-only: shared)."""
+    grid = H * _POINTS / GRID
+    grid.flags.writeable = False
+    return grid
+
+
 def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
     """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
     must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
-    s = t0 + H * _POINTS / GRID
-    out = np.abs(np.interp(s, times, values))
+    s = t0 + _grid(H)
+    out = _interp(s, times, values)
+    np.abs(out, out=out)
     _MAX.accumulate(out, out=out)
-    lo = times.searchsorted(t0, side="left")
-    hi = times.searchsorted(t0 + H, side="right")
+    lo = times.searchsorted(t0, "left")
+    hi = times.searchsorted(t0 + H, "right")
     if hi > lo:
         # a knot's value counts from the first grid point at or after it: the largest |value|
         # of the knots up to each grid point (a prefix maximum, sampled where each grid point falls)
@@ -596,8 +886,8 @@ def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) 
         _MAX.accumulate(prefix, out=prefix)
         # the grid points at or after the first knot (k > 0 there: k counts the knots at or
         # before each grid point, and grows along the grid)
-        first = s.searchsorted(knots[0], side="left")
-        k = knots.searchsorted(s[first:], side="right")
+        first = s.searchsorted(knots[0], "left")
+        k = knots.searchsorted(s[first:], "right")
         k -= 1
         tail = out[first:]
         _MAX(tail, prefix[k], out=tail)
@@ -647,8 +937,12 @@ class OpenGaps:
         # every building linear (no elastic range, no bound through yielding): the proof is
         # :meth:`_linear_horizons`, with the per-building and per-pair work it caches below
         self._all_linear = not self.elastic and not self.yielded
-        # which levels (None: all) -> per pair, what the linear proof reuses (:meth:`_linear_plan`)
+        # which levels (None: all) -> per pair, what the linear proof reuses (:meth:`_linear_plan`),
+        # and the stacked proof of two bilinear buildings (:meth:`_bilinear_plan`)
         self._plans: dict = {}
+        #: two bilinear buildings with no held force are proven by :class:`_BilinearPair` (False:
+        #: by the per-building pieces, as its test compares)
+        self.stacked = True
 
     @classmethod
     def build(cls, system, contact_levels) -> "OpenGaps | None":
@@ -746,7 +1040,9 @@ class OpenGaps:
         The levels between the same two buildings are proven together (one array operation
         each, as :func:`open_horizon` does for one level, with the same arithmetic).  A level
         of a bilinear building that this linear proof leaves short of ``H`` is proven again
-        through yielding (:meth:`_through_yielding`), and keeps the longer horizon."""
+        through yielding (:meth:`_through_yielding`), and keeps the longer horizon.  Two bilinear
+        buildings with no held force are proven by :class:`_BilinearPair` (the same arithmetic,
+        both buildings stacked), every building linear by :meth:`_linear_horizons`."""
         forces = forces or {}
         if self._all_linear:
             return self._linear_horizons(y, H, ground, forces, which)
@@ -787,7 +1083,11 @@ class OpenGaps:
             return s
 
         yielded = self.yielded
-        for left, right, positions, fl, fr, gap in pairs:
+        fast = self._bilinear_plan(which) if self.stacked else [None] * len(pairs)
+        for k, (left, right, positions, fl, fr, gap) in enumerate(pairs):
+            if fast[k] is not None and left not in forces and right not in forces:
+                fast[k].prove(y, H, ground_bound(), out)     # the same arithmetic, stacked
+                continue
             if prove_linear(left) != 0.0 and prove_linear(right) != 0.0:
                 s = min(linear[left], linear[right])
                 xl, bl, ll = motions[left].floors()
@@ -824,6 +1124,20 @@ class OpenGaps:
         if plan is not None:
             return plan
         plan = [_LinearPair(self, *pair) for pair in self._pairs(which)]
+        if len(self._plans) < _PAIRS_KEPT:
+            self._plans[key] = plan
+        return plan
+
+    def _bilinear_plan(self, which: Sequence[int] | None) -> list:
+        """Per pair of :meth:`_pairs`, a :class:`_BilinearPair` where both buildings are bilinear
+        with a bound through yielding (else None), kept per grouping as :meth:`_pairs`."""
+        key = ("bilinear", None if which is None else tuple(which))
+        plan = self._plans.get(key)
+        if plan is not None:
+            return plan
+        stacked = set(self.elastic) & set(self.yielded)
+        plan = [_BilinearPair(self, *pair) if pair[0] in stacked and pair[1] in stacked else None
+                for pair in self._pairs(which)]
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
@@ -870,7 +1184,8 @@ class OpenGaps:
                 mid = x[:, :-1] + x[:, 1:]
                 mid *= 0.5
                 slack = (0.5 * dS * rate[floors])[:, None] + forced[floors, 1:]
-                edge = sign * mid + slack
+                # sign * mid + slack, without the product (exact either way: -mid + slack is slack - mid)
+                edge = mid + slack if sign > 0.0 else slack - mid
                 if valid < GRID:
                     edge[:, valid:] = np.inf
                 out = edge if out is None else np.minimum(out, edge)

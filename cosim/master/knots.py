@@ -7,7 +7,7 @@ integrates its exact first-order-hold response across them (``n_knots = 0``: the
 ``ag``).  The ground motion is a source: nothing it computes depends on the other FMUs, so in
 Gauss-Seidel order it may run ahead.  :class:`GroundLookahead` steps it in chunks ahead of the
 communication points and keeps the polyline of what lies ahead; each building step
-``[t0, t1]`` gets the polyline cut at its ends (:meth:`GroundLookahead.slice`: one-sided values
+``[t0, t1]`` gets the polyline cut at its ends (:meth:`GroundLookahead.cut`: one-sided values
 at the cuts, the samples in between), and the planner gets the largest ``|ag|`` ahead
 (:meth:`GroundLookahead.bound`) before it chooses the step.  Fewer ground steps, exact
 buildings over any step that holds at most ``capacity`` knots, and a known input for the proof
@@ -100,8 +100,15 @@ class GroundLookahead:
     def slice(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """The polyline over ``[t0, t1]``: ``(times, values)`` with ``times[0] = t0``,
         ``times[-1] = t1``, the value just after ``t0`` and just before ``t1`` (one-sided at a
-        jump) and every knot strictly between.  A knot within 1e-12 of the step of an end
-        is that end (its value differs by at most the slope times that distance)."""
+        jump) and every knot strictly between (views of :meth:`cut`)."""
+        knots = self.cut(t0, t1)
+        return knots[0::2], knots[1::2]
+
+    def cut(self, t0: float, t1: float) -> np.ndarray:
+        """:meth:`slice` interleaved, ``[t0, a0, t_1, a_1, ..., t1, a1]``: the order of the
+        buildings' knot inputs (``t_knot[k], ag_knot[k]``), so that each building copies it in
+        one piece.  A knot within 1e-12 of the step of an end is that end (its value differs by
+        at most the slope times that distance)."""
         times, values = self.times, self.values
         snap = 1e-12 * (t1 - t0)
         i0 = int(times.searchsorted(t0 + snap, side="right"))   # first knot after t0
@@ -123,13 +130,12 @@ class GroundLookahead:
             v1 = float(values[i1 - 1] + (t1 - times[i1 - 1]) / (times[i1] - times[i1 - 1])
                        * (values[i1] - values[i1 - 1]))
         n = i1 - i0 + 2
-        t = np.empty(n)
-        a = np.empty(n)
-        t[0], a[0] = t0, v0
+        knots = np.empty(2 * n)
+        knots[0], knots[1] = t0, v0
         if n > 2:
-            t[1:-1], a[1:-1] = times[i0:i1], values[i0:i1]
-        t[-1], a[-1] = t1, v1
-        return t, a
+            knots[2:-2:2], knots[3:-2:2] = times[i0:i1], values[i0:i1]
+        knots[-2], knots[-1] = t1, v1
+        return knots
 
     def knots_in(self, t0: float, t1: float) -> int:
         """How many knots :meth:`slice` would give over ``[t0, t1]``."""

@@ -39,8 +39,6 @@ if TYPE_CHECKING:
 RECORD_SETS = ("summary", "all")
 #: most history values (rows x columns) a run may keep: 2e8 doubles = 1.6 GB
 MAX_HISTORY_VALUES = 200_000_000
-#: ``ndarray.any`` without its Python wrapper (the peaks are tracked after every step)
-_ANY = np.logical_or.reduce
 
 
 def building_columns(system: "System", name: str, variables: Iterable[str]) -> list[str]:
@@ -145,12 +143,14 @@ class Recorder:
         signed = [c for c in tracked if c.rsplit(".", 1)[1] in ("F", "delta")]
         absolute = [c for c in tracked if c not in signed]
         self._abs_cols, self._signed_cols = absolute, signed
-        self._abs = np.array([index[c] for c in absolute], dtype=np.intp)
-        self._sgn = np.array([index[c] for c in signed], dtype=np.intp)
-        self.abs_max = np.zeros(self._abs.size)
-        self.abs_time = np.zeros(self._abs.size)
-        self.sgn_max = np.full(self._sgn.size, -np.inf)
-        self.sgn_time = np.zeros(self._sgn.size)
+        # one running maximum per tracked value, in one gather per step: an absolute peak is the
+        # larger of the running maxima of x and of -x (the same number), reached when the first of
+        # them reached it (peaks())
+        a = [index[c] for c in absolute]
+        self._peak_index = np.array(a + a + [index[c] for c in signed], dtype=np.intp)
+        self._peak_sign = np.array([1.0] * len(a) + [-1.0] * len(a) + [1.0] * len(signed))
+        self._peak = np.zeros(self._peak_index.size)
+        self._peak_time = np.zeros(self._peak_index.size)
         # impact onsets of every step
         self._contacts = []
         self._ended = {}
@@ -176,10 +176,9 @@ class Recorder:
         """The state at ``t0`` (after initialisation, every output read): the first row, the
         peaks' starting values, the impact counters."""
         y = self.system.y
-        self.abs_max = np.abs(y[self._abs])
-        self.abs_time[:] = t0
-        self.sgn_max = y[self._sgn].copy()
-        self.sgn_time[:] = t0
+        y.take(self._peak_index, out=self._peak)
+        self._peak *= self._peak_sign
+        self._peak_time[:] = t0
         for node, i_impacts, i_F, i_delta in self._contacts:
             self.impacts[node.name] = int(node.integers.values[i_impacts])
             self._active[node.name] = y.item(i_F) != 0.0 or y.item(i_delta) >= 0.0
@@ -222,18 +221,14 @@ class Recorder:
     def track(self, t_start: float, t_end: float) -> None:
         """Peaks and impact onsets of the step ``[t_start, t_end]`` that was just accepted."""
         y = self.system.y
-        if self._abs.size:
-            v = np.abs(y[self._abs])
-            up = v > self.abs_max
-            if _ANY(up):
-                self.abs_max[up] = v[up]
-                self.abs_time[up] = t_end
-        if self._sgn.size:
-            v = y[self._sgn]
-            up = v > self.sgn_max
-            if _ANY(up):
-                self.sgn_max[up] = v[up]
-                self.sgn_time[up] = t_end
+        if self._peak_index.size:
+            now = y[self._peak_index]
+            now *= self._peak_sign
+            up = now > self._peak
+            first = up.argmax()                     # the first rise, or 0 if none (cheaper than any())
+            if up[first]:
+                self._peak[up] = now[up]
+                self._peak_time[up] = t_end
         item = y.item
         was_active = self._active
         for node, i_impacts, i_F, i_delta in self._contacts:
@@ -273,8 +268,14 @@ class Recorder:
     def peaks(self) -> dict[str, tuple[float, float]]:
         """``column -> (peak, time of the step end where it was reached)``: absolute values for
         floors and base shears, signed maxima for contact forces and penetrations."""
-        out = {c: (float(m), float(t)) for c, m, t in zip(self._abs_cols, self.abs_max, self.abs_time)}
-        out.update({c: (float(m), float(t)) for c, m, t in zip(self._signed_cols, self.sgn_max, self.sgn_time)})
+        n = len(self._abs_cols)
+        peak, time = self._peak.tolist(), self._peak_time.tolist()
+        out = {}
+        for i, c in enumerate(self._abs_cols):
+            up, down = peak[i], peak[n + i]         # the running maxima of x and of -x
+            t = time[i] if up > down else time[n + i] if down > up else min(time[i], time[n + i])
+            out[c] = (abs(max(up, down)), t)        # abs: |x| = 0 is +0.0 whatever the sign of x
+        out.update(zip(self._signed_cols, zip(peak[2 * n:], time[2 * n:])))
         return out
 
     def history(self) -> tuple[np.ndarray, np.ndarray]:

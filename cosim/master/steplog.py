@@ -217,12 +217,16 @@ class ContactWindowLog:
         self._buildings = _pounding_buildings(system) if self._forces else []
         self._rows: list[tuple] = []
         self._prev = system.y[self._index]      # the values at t0: made after initialisation
+        # whether a contact held a force at the end of the step before (kept, not looked for again)
+        self._prev_force = bool(self._forces and _ANY(self._prev[:self._forces]))
 
     def track(self, t0: float, t1: float) -> None:
         """The step ``[t0, t1]`` was accepted."""
         now = self.system.y[self._index]
         f = self._forces
-        if f and (_ANY(now[:f]) or _ANY(self._prev[:f])):
+        force = bool(f and _ANY(now[:f]))
+        held, self._prev_force = self._prev_force, force
+        if force or held:
             inputs = []
             for b in self._buildings:
                 # what the step was given: the coupling inputs, then its knots if it had any

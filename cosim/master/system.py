@@ -151,9 +151,10 @@ class Node:
             else:
                 self.inputs.set_first(self.A.shape[0])
 
-    def pull_with_knots(self, y: np.ndarray, times: np.ndarray, values: np.ndarray) -> None:
-        """Set the inputs and the ground motion over the coming step (one fmi2SetReal, and
-        fmi2SetInteger when the number of knots changes).
+    def pull_with_knots(self, y: np.ndarray, knots: np.ndarray) -> None:
+        """Set the inputs and the ground motion over the coming step, ``knots`` interleaved
+        ``[t_1, ag_1, t_2, ag_2, ...]`` (:meth:`cosim.master.knots.GroundLookahead.cut`): one
+        fmi2SetReal, and fmi2SetInteger when the number of knots changes.
 
         A step inside one record interval (two knots: the record is linear over it) gets the
         ground acceleration held at its exact mean, ``ag = (a0 + a1) / 2`` with ``n_knots = 0``:
@@ -168,16 +169,16 @@ class Node:
         buf = self.inputs.values
         if n_in:
             self._inputs(y, buf[:n_in])
-        count = times.size
-        if count == 2 and self.hold_mean:
-            buf[self.knot_ag] = 0.5 * (values[0] + values[1])
+        size = knots.size
+        if size == 4 and self.hold_mean:
+            buf[self.knot_ag] = 0.5 * (knots[1] + knots[3])
             self.inputs.set_first(n_in)
             count = 0
         else:
             o = self.knot_offset
-            buf[o:o + 2 * count:2] = times
-            buf[o + 1:o + 2 * count:2] = values
-            self.inputs.set_first(o + 2 * count)
+            buf[o:o + size] = knots
+            self.inputs.set_first(o + size)
+            count = size >> 1
         if count != self.knots_set:
             self.knot_count.set([count])
             self.knots_set = count

@@ -471,9 +471,9 @@ class Adaptive(CouplingStrategy):
         else:
             self._step_contacts(t, h)
         if look is not None:
-            times, values = look.slice(t, t + h)
+            knots = look.cut(t, t + h)
             for node in system.buildings:
-                node.pull_with_knots(y, times, values)
+                node.pull_with_knots(y, knots)
                 node.instance.do_step(t, h)
                 node.push()
         else:
