@@ -336,6 +336,7 @@ class Configuration:
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
+        self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
 
     # -- evaluation -------------------------------------------------------------------------
     def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
@@ -373,6 +374,10 @@ class Configuration:
             raise ValueError(f"segment of {length:.6g} s spans {chunks} quadrature chunks of the fastest "
                              f"mode (|lambda| = {self.rate:.6g} 1/s); the limit is {MAX_CHUNKS}: use shorter steps")
         width = length / chunks
+        if chunks == 1:
+            # the general form's values (0 + x is x; a tile of one is a copy) without its four
+            # array calls: most segments of a yielding building are one chunk
+            return width * GAUSS_NODES, width * GAUSS_WEIGHTS
         starts = width * np.arange(chunks)
         nodes = (starts[:, None] + width * GAUSS_NODES[None, :]).ravel()
         weights = np.tile(width * GAUSS_WEIGHTS, chunks)
@@ -480,6 +485,14 @@ class Configuration:
         ramp_change = FV @ (0.5 * length * length * growth * self.ramp_abs)
         # acting on [|Re q'(0)|; |Im q'(0)|] (their sum bounds |q'(0)|): no square root per step
         return np.ascontiguousarray(np.hstack([change, change])), ramp_change
+
+    def taylor_powers(self, degree: int) -> tuple:
+        """:func:`_taylor_powers` of this configuration's eigenvalues, made once per degree (a
+        yielding building asks for a handful of degrees, at every ad hoc segment)."""
+        powers = self._taylor_powers.get(degree)
+        if powers is None:
+            powers = self._taylor_powers[degree] = _taylor_powers(self.lam, degree)
+        return powers
 
     def drift_curvature_rows(self):
         """``(M, Ra, Rb)`` for second-order bounds of the storey drifts ``d = D u`` over a segment.
@@ -706,7 +719,8 @@ class TaylorSegment(ModalSegment):
             rho = self.cfg.rate * self.length
             if rho > TAYLOR_MAX_SPAN:
                 return None
-            self._taylor = _taylor_columns(self.cfg.lam, self.q0, self._dq0, self.beta1, _taylor_degree(rho))
+            self._taylor = _taylor_columns(self.cfg.taylor_powers(_taylor_degree(rho)), self.q0, self._dq0,
+                                          self.beta1)
         return self._taylor
 
     def evaluator(self, c_modal: np.ndarray, count: int):
@@ -812,18 +826,27 @@ def _taylor_degree(rho: float) -> int:
     return k + _TAYLOR_DERIVATIVES + 1
 
 
-def _taylor_columns(lam, q0, dq0, beta1, degree: int) -> np.ndarray:
-    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`):
-    ``(lam^(k-1) q'(0) + lam^(k-2) beta1) / k!`` for ``k >= 2``, from the powers
-    ``P[:, j] = lam^j / j!`` (one cumulative product)."""
+def _taylor_powers(lam, degree: int) -> tuple:
+    """``(P1, P2, k, degree)`` of :func:`_taylor_columns` for eigenvalues ``lam``: with the powers
+    ``P[:, j] = lam^j / j!`` (one cumulative product), ``P1 = P[:, 1:]``, ``P2 = P[:, :-1] / (k - 1)``
+    and ``k = 2 .. degree``: what depends on the configuration and the degree only (kept by
+    :meth:`Configuration.taylor_powers`)."""
     k = np.arange(2, degree + 1, dtype=float)
     P = np.ones((lam.size, degree), dtype=complex)
     P[:, 1:] = lam[:, None] / np.arange(1, degree, dtype=float)
     np.cumprod(P, axis=1, out=P)
-    cols = np.empty((lam.size, degree + 1), dtype=complex)
+    return P[:, 1:], P[:, :-1] / (k - 1.0), k, degree
+
+
+def _taylor_columns(powers: tuple, q0, dq0, beta1) -> np.ndarray:
+    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`):
+    ``(lam^(k-1) q'(0) + lam^(k-2) beta1) / k!`` for ``k >= 2``, from the configuration's
+    :func:`_taylor_powers` of that degree."""
+    P1, P2, k, degree = powers
+    cols = np.empty((q0.size, degree + 1), dtype=complex)
     cols[:, 0] = q0
     cols[:, 1] = dq0
-    cols[:, 2:] = (dq0[:, None] * P[:, 1:] + beta1[:, None] * (P[:, :-1] / (k - 1.0))) / k
+    cols[:, 2:] = (dq0[:, None] * P1 + beta1[:, None] * P2) / k
     return cols
 
 
