@@ -1195,15 +1195,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], rem)
         best = None
         D = self._drift_rows
+        event_rows = cfg.event_rows
         for i, kind in candidates:
-            row = np.zeros(2 * n)
-            if kind == 0:
-                row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
-                offset = 0.0
-            else:
-                row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
-                offset = self.dy[i] + kind * state.slip[i]
-            c_modal = row @ cfg.V
+            # the modal row of the event function, kept by the configuration (the same product)
+            key = (i, kind, modes[i])
+            c_modal = event_rows.get(key)
+            if c_modal is None:
+                row = np.zeros(2 * n)
+                if kind == 0:
+                    row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
+                else:
+                    row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
+                c_modal = event_rows[key] = row @ cfg.V
+            offset = 0.0 if kind == 0 else self.dy[i] + kind * state.slip[i]
             horizon = rem if best is None else best[0]
             if horizon <= 0.0:
                 return segment, best

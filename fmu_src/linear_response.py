@@ -337,6 +337,9 @@ class Configuration:
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
         self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
+        # modal rows of the event functions searched in this configuration, by (storey, kind,
+        # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event): at most 3n
+        self.event_rows: dict[tuple, np.ndarray] = {}
 
     # -- evaluation -------------------------------------------------------------------------
     def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
@@ -739,6 +742,15 @@ class TaylorSegment(ModalSegment):
                     d1 = d1 * s + v
                     v = v * s + ck
                 return [v, d1, 2.0 * d2]
+
+            def value_and_slope(s):
+                # three's g and g' (the same operations, without g''): what Newton asks, 5 times a root
+                v = d1 = 0.0
+                for ck in highest_first:
+                    d1 = d1 * s + v
+                    v = v * s + ck
+                return v, d1
+            three.value_and_slope = value_and_slope
             return three
         polys = [a[::-1]]                               # highest degree first, for Horner
         for _ in range(1, count):
@@ -909,6 +921,15 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
         d[0] += offset
         return d
 
+    two = getattr(evaluate, "value_and_slope", None) if order == 0 else None
+    if two is None:
+        def newton(s):
+            return tuple(at(s)[:2])
+    else:
+        def newton(s):
+            v, d1 = two(s)
+            return v + offset, d1
+
     stack = [(0.0, length)]
     values = {0.0: first}
     evaluations = 1
@@ -921,7 +942,7 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
             evaluations += 1
         width = b - a
         if vb[0] < 0.0 and va[0] > 0.0:
-            lo, hi = bracketed_newton(lambda s: tuple(at(s)[:2]), a, b, va[0], vb[0], xtol)
+            lo, hi = bracketed_newton(newton, a, b, va[0], vb[0], xtol)
             return hi
         if vb[0] >= 0.0:
             b4 = segment.bound(c_abs, order + 4, a, width)
