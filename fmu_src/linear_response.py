@@ -432,8 +432,13 @@ class Configuration:
         nodes, weights = self.chunk_nodes(length)
         x = np.multiply.outer(self.lam, nodes)
         e, p1, p2 = phi_functions(x)                                          # (2n, K)
-        modal = (e[:, :, None] * Wy[:, None, :] + (nodes * p1)[:, :, None] * B0y[:, None, :]
-                 + (nodes * nodes * p2)[:, :, None] * B1y[:, None, :])        # (2n, K, size)
+        # (2n, K, size): e W on the columns of z0, (s phi1) WB0 + (s^2 phi2) WB1 on those of w, by
+        # blocks: the sum over all columns with the other terms' zero blocks added gives these
+        # values (adding a zero changes no nonzero number), at less than half the cost
+        modal = np.empty((2 * n, nodes.size, size), dtype=complex)
+        np.multiply(e[:, :, None], self.W[:, None, :], out=modal[:, :, :2 * n])
+        np.add((nodes * p1)[:, :, None] * self.WB0[:, None, :], (nodes * nodes * p2)[:, :, None] * self.WB1[:, None, :],
+               out=modal[:, :, 2 * n:])
         K_nodes = nodes.size
         if self.legacy_arithmetic:
             vel = np.einsum("ij,jks->kis", self.V[n:], modal).real                 # (K, n, size)
