@@ -209,3 +209,50 @@ def test_ad_hoc_and_mapped_segments_give_the_same_run(monkeypatch, n):
     np.testing.assert_allclose(a.peaks, c.peaks, rtol=1e-9)
     for key in ("E_input", "E_damping", "E_hysteretic"):
         assert getattr(a, key) == pytest.approx(getattr(c, key), rel=1e-11)
+
+
+def test_newton_reads_the_value_and_slope_bit_for_bit():
+    """first_root's Newton takes g and g' from ``value_and_slope``, which skips three's g'': the
+    same Horner operations, so the same bits (an event time must not move by a search's shortcut)."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    rng = np.random.default_rng(7)
+    for rho in (0.1, 1.0, 2.0):
+        length = rho / cfg.rate
+        z0 = rng.normal(size=2 * n) * 0.02
+        w = np.concatenate([[1.5, -90.0], rng.normal(size=n) * 1e5])
+        seg = TaylorSegment(cfg, z0, w, length)
+        for row in range(n, 2 * n):
+            three = seg.evaluator(cfg.peak_modal[row], 3)
+            for s in np.linspace(0.0, length, 7).tolist():
+                assert three.value_and_slope(s) == tuple(three(s)[:2])
+
+
+def test_one_chunk_nodes_and_cached_taylor_powers_are_the_general_ones():
+    """The one-chunk quadrature nodes and the per-degree Taylor powers kept by the configuration
+    give the values of the general formulas, bit for bit; and the Taylor columns are
+    ``q^(k)(0) / k!`` (``lam^(k-1) q'(0) + lam^(k-2) beta1``), to round-off."""
+    import math
+    from fmu_src.linear_response import GAUSS_NODES, GAUSS_WEIGHTS, _taylor_powers
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = 1.0 / cfg.rate                       # one chunk (CHUNK_RATE = 2)
+    nodes, weights = cfg.chunk_nodes(length)
+    width = length
+    assert np.array_equal(nodes, (width * np.arange(1)[:, None] + width * GAUSS_NODES[None, :]).ravel())
+    assert np.array_equal(weights, np.tile(width * GAUSS_WEIGHTS, 1))
+    assert cfg.chunk_nodes(3.0 / cfg.rate)[0].size == 2 * GAUSS_NODES.size     # two chunks: general form
+    assert cfg.taylor_powers(12) is cfg.taylor_powers(12)
+    fresh = _taylor_powers(cfg.lam, 12)
+    assert all(np.array_equal(a, c) for a, c in zip(cfg.taylor_powers(12)[:3], fresh[:3]))
+    rng = np.random.default_rng(8)
+    z0 = rng.normal(size=2 * n) * 0.02
+    w = np.concatenate([[1.5, -90.0], rng.normal(size=n) * 1e5])
+    seg = TaylorSegment(cfg, z0, w, length)
+    columns = seg.taylor()
+    q0, beta0, beta1 = cfg.modal(z0, w)
+    dq0 = cfg.lam * q0 + beta0
+    for k in range(2, columns.shape[1]):
+        want = (cfg.lam ** (k - 1) * dq0 + cfg.lam ** (k - 2) * beta1) / math.factorial(k)
+        scale = (np.abs(cfg.lam) ** (k - 1) * np.abs(dq0) + np.abs(cfg.lam) ** (k - 2) * np.abs(beta1)) / math.factorial(k)
+        assert np.all(np.abs(columns[:, k] - want) <= 1e-13 * scale + 1e-300), k
