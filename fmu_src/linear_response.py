@@ -304,6 +304,8 @@ class Configuration:
         self.lam2 = self.lam_abs ** 2
         self.lam3 = self.lam_abs ** 3
         self.lam4 = self.lam_abs ** 4
+        # columns |lam|^0 .. |lam|^4 (TaylorSegment._bound_parts scales them by a segment's amplitudes)
+        self.lam_powers = np.column_stack([np.ones_like(self.lam_abs), self.lam_abs, self.lam2, self.lam3, self.lam4])
         self.rate = float(np.max(self.lam_abs)) if n else 0.0
         self.growth_rate = max(0.0, float(np.max(lam.real)))   # > 0 only by round-off
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w.
@@ -816,12 +818,10 @@ class TaylorSegment(ModalSegment):
         key = id(c_modal_abs)
         hit = self._bounds.get(key)
         if hit is None or hit[0] is not c_modal_abs:
-            cfg = self.cfg
-            lam = cfg.lam_abs
+            powers = self.cfg.lam_powers
             weights = c_modal_abs
-            powers = [np.ones_like(lam), lam, cfg.lam2, cfg.lam3, cfg.lam4]
-            amp0 = weights @ np.column_stack([p * self._amp0 for p in powers])
-            ramp = weights @ np.column_stack([p * self._ramp for p in powers])
+            amp0 = weights @ (powers * self._amp0[:, None])
+            ramp = weights @ (powers * self._ramp[:, None])
             parts = {k: (float(amp0[k - 1]), float(ramp[k - 1]), float(ramp[k - 2])) for k in range(2, 6)}
             hit = self._bounds[key] = (c_modal_abs, parts)
         return hit[1]
