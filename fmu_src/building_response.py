@@ -1260,6 +1260,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             monotonic &= G[:, 2] * G[:, 3] > 0.0
             keep = keep & ~(reach <= limits) & ~monotonic
         candidates = keep.nonzero()[0].tolist()
+        if not candidates:            # every function cleared: only the end values count
+            state.peaks = new
+            return
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
         rows = G.tolist()

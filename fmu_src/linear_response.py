@@ -593,19 +593,16 @@ class Scan:
         re = vector[6 * m:6 * m + two_n]
         im = vector[6 * m + two_n:]
         amp = np.sqrt(re * re + im * im)
-        lam = cfg.lam_abs
+        lam = cfg.lam_powers          # columns |lam|^0 .. |lam|^4
         if ag_slope != 0.0:
             ramp = abs(ag_slope) * cfg.ramp_abs
             amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-            powers = np.empty((two_n, 2))
-            powers[:, 0] = cfg.lam3 * amp + cfg.lam2 * ramp
-            powers[:, 1] = cfg.lam4 * amp + cfg.lam3 * ramp
+            # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
+            powers = lam[:, 3:5] * amp[:, None] + lam[:, 2:4] * ramp[:, None]
         else:
             if cfg.growth_rate:
                 amp = amp * math.exp(cfg.growth_rate * length)
-            powers = np.empty((two_n, 2))
-            powers[:, 0] = cfg.lam3 * amp
-            powers[:, 1] = cfg.lam4 * amp
+            powers = lam[:, 3:5] * amp[:, None]
         self.B = cfg.peak_modal_abs @ powers
 
 
