@@ -154,23 +154,46 @@ def hermite_range(g0, g1, d0, d1):
 
 
 def hermite_range_scalar(g0: float, g1: float, d0: float, d1: float) -> tuple[float, float]:
-    """:func:`hermite_range` for floats (the bisection searches call it many times)."""
+    """:func:`hermite_range` for floats (the bisection searches call it many times).
+
+    Written out for speed (20,000 calls in a yielding run): the comparisons choose what the
+    builtins ``min`` and ``max`` would (the first of equal values), the roots are taken in the
+    same order, so the result is the same pair of floats as ``min``/``max`` over a tuple of roots.
+    """
     a = 3.0 * (g1 - g0) - 2.0 * d0 - d1
     b = 2.0 * (g0 - g1) + d0 + d1
-    lo, hi = min(g0, g1), max(g0, g1)
+    if g1 < g0:
+        lo, hi = g1, g0
+    else:
+        lo = g0
+        hi = g1 if g1 > g0 else g0
     qa, qb = 3.0 * b, 2.0 * a
-    roots = ()
     if abs(qa) > 1e-14 * (abs(qb) + abs(d0)) + 1e-300:
         disc = qb * qb - 4.0 * qa * d0
         if disc >= 0.0:
             sq = math.sqrt(disc)
-            roots = ((-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa))
+            r = (-qb - sq) / (2.0 * qa)
+            if 0.0 < r < 1.0:
+                h = g0 + r * (d0 + r * (a + r * b))
+                if h < lo:
+                    lo = h
+                if h > hi:
+                    hi = h
+            r = (-qb + sq) / (2.0 * qa)
+            if 0.0 < r < 1.0:
+                h = g0 + r * (d0 + r * (a + r * b))
+                if h < lo:
+                    lo = h
+                if h > hi:
+                    hi = h
     elif qb != 0.0:
-        roots = (-d0 / qb,)
-    for r in roots:
+        r = -d0 / qb
         if 0.0 < r < 1.0:
             h = g0 + r * (d0 + r * (a + r * b))
-            lo, hi = min(lo, h), max(hi, h)
+            if h < lo:
+                lo = h
+            if h > hi:
+                hi = h
     return lo, hi
 
 

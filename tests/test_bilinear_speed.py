@@ -256,3 +256,31 @@ def test_one_chunk_nodes_and_cached_taylor_powers_are_the_general_ones():
         want = (cfg.lam ** (k - 1) * dq0 + cfg.lam ** (k - 2) * beta1) / math.factorial(k)
         scale = (np.abs(cfg.lam) ** (k - 1) * np.abs(dq0) + np.abs(cfg.lam) ** (k - 2) * np.abs(beta1)) / math.factorial(k)
         assert np.all(np.abs(columns[:, k] - want) <= 1e-13 * scale + 1e-300), k
+
+
+def test_scalar_hermite_range_is_the_vectorised_one_and_brackets_the_cubic():
+    """hermite_range_scalar (written out for speed) gives what the vectorised hermite_range gives
+    on the same floats, and its range holds every sample of the cubic Hermite and is reached (to
+    1e-12 of the magnitudes) by the densest of them: an extremum left out or misplaced fails."""
+    from fmu_src.linear_response import hermite_range, hermite_range_scalar
+    rng = np.random.default_rng(11)
+    t = np.linspace(0.0, 1.0, 20001)
+    h00, h01 = 2 * t ** 3 - 3 * t ** 2 + 1, -2 * t ** 3 + 3 * t ** 2
+    h10, h11 = t ** 3 - 2 * t ** 2 + t, t ** 3 - t ** 2
+    special = [0.0, 1.0, -1.0, 2.0, 0.5]
+    for trial in range(3000):
+        if trial % 3 == 0:
+            g = rng.choice(special, size=4)              # ties, zero slopes, a vanishing cubic term
+        else:
+            g = rng.normal(size=4) * 10.0 ** rng.integers(-3, 4, size=4)
+        g0, g1, d0, d1 = (float(x) for x in g)
+        lo, hi = hermite_range_scalar(g0, g1, d0, d1)
+        vlo, vhi = hermite_range(*(np.array([x]) for x in (g0, g1, d0, d1)))
+        assert (lo, hi) == (float(vlo[0]), float(vhi[0])), (g0, g1, d0, d1)
+        samples = g0 * h00 + g1 * h01 + d0 * h10 + d1 * h11
+        scale = 1e-12 * (abs(g0) + abs(g1) + abs(d0) + abs(d1)) + 1e-300
+        assert samples.min() >= lo - scale and samples.max() <= hi + scale
+        # the grid's spacing 5e-5 misses an interior extremum by at most max|H''| (5e-5)^2 / 8, with
+        # |H''| <= 6 |g0 - g1| + 4 |d0| + 4 |d1| on [0, 1]
+        slack = 3.2e-10 * (6.0 * abs(g0 - g1) + 4.0 * abs(d0) + 4.0 * abs(d1)) + scale
+        assert samples.min() <= lo + slack and samples.max() >= hi - slack
