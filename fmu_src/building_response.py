@@ -1195,15 +1195,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             segment = TaylorSegment(cfg, y[:2 * n], y[2 * n:], rem)
         best = None
         D = self._drift_rows
+        event_rows = cfg.event_rows
         for i, kind in candidates:
-            row = np.zeros(2 * n)
-            if kind == 0:
-                row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
-                offset = 0.0
-            else:
-                row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
-                offset = self.dy[i] + kind * state.slip[i]
-            c_modal = row @ cfg.V
+            # the modal row of the event function, kept by the configuration (the same product)
+            key = (i, kind, modes[i])
+            c_modal = event_rows.get(key)
+            if c_modal is None:
+                row = np.zeros(2 * n)
+                if kind == 0:
+                    row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
+                else:
+                    row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
+                c_modal = event_rows[key] = row @ cfg.V
+            offset = 0.0 if kind == 0 else self.dy[i] + kind * state.slip[i]
             horizon = rem if best is None else best[0]
             if horizon <= 0.0:
                 return segment, best
@@ -1256,16 +1260,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             monotonic &= G[:, 2] * G[:, 3] > 0.0
             keep = keep & ~(reach <= limits) & ~monotonic
         candidates = keep.nonzero()[0].tolist()
+        if not candidates:            # every function cleared: only the end values count
+            state.peaks = new
+            return
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
-        rows = G.tolist()
-        bounds = B.tolist()
-        ends = g1.tolist()
+        # (only the candidates' rows: most segments leave a few of the 3n functions)
+        rows = G[candidates].tolist()
+        bounds = B[candidates].tolist()
+        ends = g1[candidates].tolist()
         offsets = accel_offset.tolist()
-        limits = limits.tolist()
+        limits = limits[candidates].tolist()
         deferred = []
-        for j in candidates:
-            g0, _, s0, s1, c0, c1 = rows[j]
+        for j, (g0, _, s0, s1, c0, c1), bound, end, limit in zip(candidates, rows, bounds, ends, limits):
             if j >= 2 * n:
                 g0 = g0 + offsets[j - 2 * n]
             else:
@@ -1274,7 +1281,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # a slope that provably keeps its sign puts the extremes at the ends: first the
                 # bound of the slope's Hermite (as the prefilter's above, with its round-off
                 # margin: where it decides, the exact test decides the same), then the test
-                err = bounds[j][1] * w4
+                err = bound[1] * w4
                 a0, a1 = abs(s0), abs(s1)
                 e = length * (abs(c0) + abs(c1))
                 if min(a0, a1) - _HERMITE_SLOPE_GAIN * e - _HERMITE_MARGIN * (a0 + a1 + e) - err > 0.0:
@@ -1282,9 +1289,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 lo, hi = hermite_range_scalar(s0, s1, length * c0, length * c1)
                 if lo - err > 0.0 or hi + err < 0.0:
                     continue
-            lo, hi = hermite_range_scalar(g0, ends[j], length * s0, length * s1)
-            reach = max(-lo, hi) + bounds[j][0] * w4
-            if reach <= limits[j]:
+            lo, hi = hermite_range_scalar(g0, end, length * s0, length * s1)
+            reach = max(-lo, hi) + bound[0] * w4
+            if reach <= limit:
                 continue
             # a new peak is possible in this segment: keep it for a search when the peaks are
             # read (most are superseded by a later, higher peak before anyone reads them)

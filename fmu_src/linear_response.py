@@ -154,23 +154,46 @@ def hermite_range(g0, g1, d0, d1):
 
 
 def hermite_range_scalar(g0: float, g1: float, d0: float, d1: float) -> tuple[float, float]:
-    """:func:`hermite_range` for floats (the bisection searches call it many times)."""
+    """:func:`hermite_range` for floats (the bisection searches call it many times).
+
+    Written out for speed (20,000 calls in a yielding run): the comparisons choose what the
+    builtins ``min`` and ``max`` would (the first of equal values), the roots are taken in the
+    same order, so the result is the same pair of floats as ``min``/``max`` over a tuple of roots.
+    """
     a = 3.0 * (g1 - g0) - 2.0 * d0 - d1
     b = 2.0 * (g0 - g1) + d0 + d1
-    lo, hi = min(g0, g1), max(g0, g1)
+    if g1 < g0:
+        lo, hi = g1, g0
+    else:
+        lo = g0
+        hi = g1 if g1 > g0 else g0
     qa, qb = 3.0 * b, 2.0 * a
-    roots = ()
     if abs(qa) > 1e-14 * (abs(qb) + abs(d0)) + 1e-300:
         disc = qb * qb - 4.0 * qa * d0
         if disc >= 0.0:
             sq = math.sqrt(disc)
-            roots = ((-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa))
+            r = (-qb - sq) / (2.0 * qa)
+            if 0.0 < r < 1.0:
+                h = g0 + r * (d0 + r * (a + r * b))
+                if h < lo:
+                    lo = h
+                if h > hi:
+                    hi = h
+            r = (-qb + sq) / (2.0 * qa)
+            if 0.0 < r < 1.0:
+                h = g0 + r * (d0 + r * (a + r * b))
+                if h < lo:
+                    lo = h
+                if h > hi:
+                    hi = h
     elif qb != 0.0:
-        roots = (-d0 / qb,)
-    for r in roots:
+        r = -d0 / qb
         if 0.0 < r < 1.0:
             h = g0 + r * (d0 + r * (a + r * b))
-            lo, hi = min(lo, h), max(hi, h)
+            if h < lo:
+                lo = h
+            if h > hi:
+                hi = h
     return lo, hi
 
 
@@ -304,6 +327,8 @@ class Configuration:
         self.lam2 = self.lam_abs ** 2
         self.lam3 = self.lam_abs ** 3
         self.lam4 = self.lam_abs ** 4
+        # columns |lam|^0 .. |lam|^4 (TaylorSegment._bound_parts scales them by a segment's amplitudes)
+        self.lam_powers = np.column_stack([np.ones_like(self.lam_abs), self.lam_abs, self.lam2, self.lam3, self.lam4])
         self.rate = float(np.max(self.lam_abs)) if n else 0.0
         self.growth_rate = max(0.0, float(np.max(lam.real)))   # > 0 only by round-off
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w.
@@ -336,6 +361,10 @@ class Configuration:
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
+        self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
+        # modal rows of the event functions searched in this configuration, by (storey, kind,
+        # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event): at most 3n
+        self.event_rows: dict[tuple, np.ndarray] = {}
 
     # -- evaluation -------------------------------------------------------------------------
     def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
@@ -373,6 +402,10 @@ class Configuration:
             raise ValueError(f"segment of {length:.6g} s spans {chunks} quadrature chunks of the fastest "
                              f"mode (|lambda| = {self.rate:.6g} 1/s); the limit is {MAX_CHUNKS}: use shorter steps")
         width = length / chunks
+        if chunks == 1:
+            # the general form's values (0 + x is x; a tile of one is a copy) without its four
+            # array calls: most segments of a yielding building are one chunk
+            return width * GAUSS_NODES, width * GAUSS_WEIGHTS
         starts = width * np.arange(chunks)
         nodes = (starts[:, None] + width * GAUSS_NODES[None, :]).ravel()
         weights = np.tile(width * GAUSS_WEIGHTS, chunks)
@@ -424,8 +457,13 @@ class Configuration:
         nodes, weights = self.chunk_nodes(length)
         x = np.multiply.outer(self.lam, nodes)
         e, p1, p2 = phi_functions(x)                                          # (2n, K)
-        modal = (e[:, :, None] * Wy[:, None, :] + (nodes * p1)[:, :, None] * B0y[:, None, :]
-                 + (nodes * nodes * p2)[:, :, None] * B1y[:, None, :])        # (2n, K, size)
+        # (2n, K, size): e W on the columns of z0, (s phi1) WB0 + (s^2 phi2) WB1 on those of w, by
+        # blocks: the sum over all columns with the other terms' zero blocks added gives these
+        # values (adding a zero changes no nonzero number), at less than half the cost
+        modal = np.empty((2 * n, nodes.size, size), dtype=complex)
+        np.multiply(e[:, :, None], self.W[:, None, :], out=modal[:, :, :2 * n])
+        np.add((nodes * p1)[:, :, None] * self.WB0[:, None, :], (nodes * nodes * p2)[:, :, None] * self.WB1[:, None, :],
+               out=modal[:, :, 2 * n:])
         K_nodes = nodes.size
         if self.legacy_arithmetic:
             vel = np.einsum("ij,jks->kis", self.V[n:], modal).real                 # (K, n, size)
@@ -480,6 +518,14 @@ class Configuration:
         ramp_change = FV @ (0.5 * length * length * growth * self.ramp_abs)
         # acting on [|Re q'(0)|; |Im q'(0)|] (their sum bounds |q'(0)|): no square root per step
         return np.ascontiguousarray(np.hstack([change, change])), ramp_change
+
+    def taylor_powers(self, degree: int) -> tuple:
+        """:func:`_taylor_powers` of this configuration's eigenvalues, made once per degree (a
+        yielding building asks for a handful of degrees, at every ad hoc segment)."""
+        powers = self._taylor_powers.get(degree)
+        if powers is None:
+            powers = self._taylor_powers[degree] = _taylor_powers(self.lam, degree)
+        return powers
 
     def drift_curvature_rows(self):
         """``(M, Ra, Rb)`` for second-order bounds of the storey drifts ``d = D u`` over a segment.
@@ -570,19 +616,16 @@ class Scan:
         re = vector[6 * m:6 * m + two_n]
         im = vector[6 * m + two_n:]
         amp = np.sqrt(re * re + im * im)
-        lam = cfg.lam_abs
+        lam = cfg.lam_powers          # columns |lam|^0 .. |lam|^4
         if ag_slope != 0.0:
             ramp = abs(ag_slope) * cfg.ramp_abs
             amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-            powers = np.empty((two_n, 2))
-            powers[:, 0] = cfg.lam3 * amp + cfg.lam2 * ramp
-            powers[:, 1] = cfg.lam4 * amp + cfg.lam3 * ramp
+            # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
+            powers = lam[:, 3:5] * amp[:, None] + lam[:, 2:4] * ramp[:, None]
         else:
             if cfg.growth_rate:
                 amp = amp * math.exp(cfg.growth_rate * length)
-            powers = np.empty((two_n, 2))
-            powers[:, 0] = cfg.lam3 * amp
-            powers[:, 1] = cfg.lam4 * amp
+            powers = lam[:, 3:5] * amp[:, None]
         self.B = cfg.peak_modal_abs @ powers
 
 
@@ -706,7 +749,8 @@ class TaylorSegment(ModalSegment):
             rho = self.cfg.rate * self.length
             if rho > TAYLOR_MAX_SPAN:
                 return None
-            self._taylor = _taylor_columns(self.cfg.lam, self.q0, self._dq0, self.beta1, _taylor_degree(rho))
+            self._taylor = _taylor_columns(self.cfg.taylor_powers(_taylor_degree(rho)), self.q0, self._dq0,
+                                          self.beta1)
         return self._taylor
 
     def evaluator(self, c_modal: np.ndarray, count: int):
@@ -725,6 +769,15 @@ class TaylorSegment(ModalSegment):
                     d1 = d1 * s + v
                     v = v * s + ck
                 return [v, d1, 2.0 * d2]
+
+            def value_and_slope(s):
+                # three's g and g' (the same operations, without g''): what Newton asks, 5 times a root
+                v = d1 = 0.0
+                for ck in highest_first:
+                    d1 = d1 * s + v
+                    v = v * s + ck
+                return v, d1
+            three.value_and_slope = value_and_slope
             return three
         polys = [a[::-1]]                               # highest degree first, for Horner
         for _ in range(1, count):
@@ -785,12 +838,10 @@ class TaylorSegment(ModalSegment):
         key = id(c_modal_abs)
         hit = self._bounds.get(key)
         if hit is None or hit[0] is not c_modal_abs:
-            cfg = self.cfg
-            lam = cfg.lam_abs
+            powers = self.cfg.lam_powers
             weights = c_modal_abs
-            powers = [np.ones_like(lam), lam, cfg.lam2, cfg.lam3, cfg.lam4]
-            amp0 = weights @ np.column_stack([p * self._amp0 for p in powers])
-            ramp = weights @ np.column_stack([p * self._ramp for p in powers])
+            amp0 = weights @ (powers * self._amp0[:, None])
+            ramp = weights @ (powers * self._ramp[:, None])
             parts = {k: (float(amp0[k - 1]), float(ramp[k - 1]), float(ramp[k - 2])) for k in range(2, 6)}
             hit = self._bounds[key] = (c_modal_abs, parts)
         return hit[1]
@@ -812,18 +863,27 @@ def _taylor_degree(rho: float) -> int:
     return k + _TAYLOR_DERIVATIVES + 1
 
 
-def _taylor_columns(lam, q0, dq0, beta1, degree: int) -> np.ndarray:
-    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`):
-    ``(lam^(k-1) q'(0) + lam^(k-2) beta1) / k!`` for ``k >= 2``, from the powers
-    ``P[:, j] = lam^j / j!`` (one cumulative product)."""
+def _taylor_powers(lam, degree: int) -> tuple:
+    """``(P1, P2, k, degree)`` of :func:`_taylor_columns` for eigenvalues ``lam``: with the powers
+    ``P[:, j] = lam^j / j!`` (one cumulative product), ``P1 = P[:, 1:]``, ``P2 = P[:, :-1] / (k - 1)``
+    and ``k = 2 .. degree``: what depends on the configuration and the degree only (kept by
+    :meth:`Configuration.taylor_powers`)."""
     k = np.arange(2, degree + 1, dtype=float)
     P = np.ones((lam.size, degree), dtype=complex)
     P[:, 1:] = lam[:, None] / np.arange(1, degree, dtype=float)
     np.cumprod(P, axis=1, out=P)
-    cols = np.empty((lam.size, degree + 1), dtype=complex)
+    return P[:, 1:], P[:, :-1] / (k - 1.0), k, degree
+
+
+def _taylor_columns(powers: tuple, q0, dq0, beta1) -> np.ndarray:
+    """``(2n, degree + 1)``: column k is ``q^(k)(0) / k!`` (see :class:`TaylorSegment`):
+    ``(lam^(k-1) q'(0) + lam^(k-2) beta1) / k!`` for ``k >= 2``, from the configuration's
+    :func:`_taylor_powers` of that degree."""
+    P1, P2, k, degree = powers
+    cols = np.empty((q0.size, degree + 1), dtype=complex)
     cols[:, 0] = q0
     cols[:, 1] = dq0
-    cols[:, 2:] = (dq0[:, None] * P[:, 1:] + beta1[:, None] * (P[:, :-1] / (k - 1.0))) / k
+    cols[:, 2:] = (dq0[:, None] * P1 + beta1[:, None] * P2) / k
     return cols
 
 
@@ -886,6 +946,15 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
         d[0] += offset
         return d
 
+    two = getattr(evaluate, "value_and_slope", None) if order == 0 else None
+    if two is None:
+        def newton(s):
+            return tuple(at(s)[:2])
+    else:
+        def newton(s):
+            v, d1 = two(s)
+            return v + offset, d1
+
     stack = [(0.0, length)]
     values = {0.0: first}
     evaluations = 1
@@ -898,7 +967,7 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
             evaluations += 1
         width = b - a
         if vb[0] < 0.0 and va[0] > 0.0:
-            lo, hi = bracketed_newton(lambda s: tuple(at(s)[:2]), a, b, va[0], vb[0], xtol)
+            lo, hi = bracketed_newton(newton, a, b, va[0], vb[0], xtol)
             return hi
         if vb[0] >= 0.0:
             b4 = segment.bound(c_abs, order + 4, a, width)

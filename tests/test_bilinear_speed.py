@@ -209,3 +209,78 @@ def test_ad_hoc_and_mapped_segments_give_the_same_run(monkeypatch, n):
     np.testing.assert_allclose(a.peaks, c.peaks, rtol=1e-9)
     for key in ("E_input", "E_damping", "E_hysteretic"):
         assert getattr(a, key) == pytest.approx(getattr(c, key), rel=1e-11)
+
+
+def test_newton_reads_the_value_and_slope_bit_for_bit():
+    """first_root's Newton takes g and g' from ``value_and_slope``, which skips three's g'': the
+    same Horner operations, so the same bits (an event time must not move by a search's shortcut)."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    rng = np.random.default_rng(7)
+    for rho in (0.1, 1.0, 2.0):
+        length = rho / cfg.rate
+        z0 = rng.normal(size=2 * n) * 0.02
+        w = np.concatenate([[1.5, -90.0], rng.normal(size=n) * 1e5])
+        seg = TaylorSegment(cfg, z0, w, length)
+        for row in range(n, 2 * n):
+            three = seg.evaluator(cfg.peak_modal[row], 3)
+            for s in np.linspace(0.0, length, 7).tolist():
+                assert three.value_and_slope(s) == tuple(three(s)[:2])
+
+
+def test_one_chunk_nodes_and_cached_taylor_powers_are_the_general_ones():
+    """The one-chunk quadrature nodes and the per-degree Taylor powers kept by the configuration
+    give the values of the general formulas, bit for bit; and the Taylor columns are
+    ``q^(k)(0) / k!`` (``lam^(k-1) q'(0) + lam^(k-2) beta1``), to round-off."""
+    import math
+    from fmu_src.linear_response import GAUSS_NODES, GAUSS_WEIGHTS, _taylor_powers
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = 1.0 / cfg.rate                       # one chunk (CHUNK_RATE = 2)
+    nodes, weights = cfg.chunk_nodes(length)
+    width = length
+    assert np.array_equal(nodes, (width * np.arange(1)[:, None] + width * GAUSS_NODES[None, :]).ravel())
+    assert np.array_equal(weights, np.tile(width * GAUSS_WEIGHTS, 1))
+    assert cfg.chunk_nodes(3.0 / cfg.rate)[0].size == 2 * GAUSS_NODES.size     # two chunks: general form
+    assert cfg.taylor_powers(12) is cfg.taylor_powers(12)
+    fresh = _taylor_powers(cfg.lam, 12)
+    assert all(np.array_equal(a, c) for a, c in zip(cfg.taylor_powers(12)[:3], fresh[:3]))
+    rng = np.random.default_rng(8)
+    z0 = rng.normal(size=2 * n) * 0.02
+    w = np.concatenate([[1.5, -90.0], rng.normal(size=n) * 1e5])
+    seg = TaylorSegment(cfg, z0, w, length)
+    columns = seg.taylor()
+    q0, beta0, beta1 = cfg.modal(z0, w)
+    dq0 = cfg.lam * q0 + beta0
+    for k in range(2, columns.shape[1]):
+        want = (cfg.lam ** (k - 1) * dq0 + cfg.lam ** (k - 2) * beta1) / math.factorial(k)
+        scale = (np.abs(cfg.lam) ** (k - 1) * np.abs(dq0) + np.abs(cfg.lam) ** (k - 2) * np.abs(beta1)) / math.factorial(k)
+        assert np.all(np.abs(columns[:, k] - want) <= 1e-13 * scale + 1e-300), k
+
+
+def test_scalar_hermite_range_is_the_vectorised_one_and_brackets_the_cubic():
+    """hermite_range_scalar (written out for speed) gives what the vectorised hermite_range gives
+    on the same floats, and its range holds every sample of the cubic Hermite and is reached (to
+    1e-12 of the magnitudes) by the densest of them: an extremum left out or misplaced fails."""
+    from fmu_src.linear_response import hermite_range, hermite_range_scalar
+    rng = np.random.default_rng(11)
+    t = np.linspace(0.0, 1.0, 20001)
+    h00, h01 = 2 * t ** 3 - 3 * t ** 2 + 1, -2 * t ** 3 + 3 * t ** 2
+    h10, h11 = t ** 3 - 2 * t ** 2 + t, t ** 3 - t ** 2
+    special = [0.0, 1.0, -1.0, 2.0, 0.5]
+    for trial in range(3000):
+        if trial % 3 == 0:
+            g = rng.choice(special, size=4)              # ties, zero slopes, a vanishing cubic term
+        else:
+            g = rng.normal(size=4) * 10.0 ** rng.integers(-3, 4, size=4)
+        g0, g1, d0, d1 = (float(x) for x in g)
+        lo, hi = hermite_range_scalar(g0, g1, d0, d1)
+        vlo, vhi = hermite_range(*(np.array([x]) for x in (g0, g1, d0, d1)))
+        assert (lo, hi) == (float(vlo[0]), float(vhi[0])), (g0, g1, d0, d1)
+        samples = g0 * h00 + g1 * h01 + d0 * h10 + d1 * h11
+        scale = 1e-12 * (abs(g0) + abs(g1) + abs(d0) + abs(d1)) + 1e-300
+        assert samples.min() >= lo - scale and samples.max() <= hi + scale
+        # the grid's spacing 5e-5 misses an interior extremum by at most max|H''| (5e-5)^2 / 8, with
+        # |H''| <= 6 |g0 - g1| + 4 |d0| + 4 |d1| on [0, 1]
+        slack = 3.2e-10 * (6.0 * abs(g0 - g1) + 4.0 * abs(d0) + 4.0 * abs(d1)) + scale
+        assert samples.min() <= lo + slack and samples.max() >= hi - slack
