@@ -498,19 +498,25 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         times = np.asarray(times, dtype=float)
         ag = np.asarray(ag, dtype=float)
         force = np.asarray(force, dtype=float)
+        first = 0
+        cost = None
         if times.size > 3 or (times.size == 3 and not self._inelastic):
-            # worth batching (None: an event may occur, interval by interval)
-            cost = self._advance_batch(state, times, ag, force)
-            if cost is not None:
-                return cost
-        if times.size > 2:
+            # worth batching: the intervals before the first one where an event may occur at once,
+            # the rest (if any) interval by interval from there
+            batch = self._advance_batch(state, times, ag, force)
+            if batch is not None:
+                cost, times, ag, first = batch
+                if first == times.size - 1:
+                    return cost
+        if first == 0 and times.size > 2:
             # interval by interval: no segment map made for one step either (_advance_batch
             # splits its steps itself, from the lengths it computes anyway)
             times, ag = _even_intervals(times, ag)
-        cost = StepCost()
+        if cost is None:
+            cost = StepCost()
         events = 0
         h = float(times[-1] - times[0])
-        for j in range(times.size - 1):
+        for j in range(first, times.size - 1):
             length = float(times[j + 1] - times[j])
             if length <= 0.0:
                 continue                      # a jump of the record: no time passes
@@ -523,9 +529,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cost.events = events
         return cost
 
-    def _advance_batch(self, state, times, ag, force) -> StepCost | None:
-        """All the knot intervals of a step at once, in the current configuration (None, and
-        the state untouched, if a yield or unloading event may occur in the step).
+    def _advance_batch(self, state, times, ag, force):
+        """The knot intervals of a step at once, in the current configuration, up to the first
+        interval in which a yield or unloading event may occur: ``(cost, times, ag, first)``
+        with the knots the step was split into (:func:`_even_intervals`) and the index of the
+        knot from which the rest of the step is left to :meth:`_interval` (``times.size - 1``:
+        none left), or None (the state untouched) if an event may occur in the first interval.
 
         Without events the intervals only chain through the state.  Intervals of one length
         (a record's samples: every step of a run measured) are chained by one product with a
@@ -533,12 +542,14 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         matrix-vector product each (with the cached map of its length).  Then one matrix
         product per distinct length gives every interval's energies and tier-1 test quantities
         (:meth:`_interval` explains them): an elastic storey must stay inside its elastic range
-        and a yielding storey keep its drift rate's sign in every interval, or the step is left
-        to :meth:`_interval`; only the intervals where a peak may grow are looked at one by
-        one, and in them only the functions that tier 1 did not clear.  Same arithmetic as
-        :meth:`_interval` per interval up to round-off, without its per-interval overhead (a
-        step of 30 record intervals costs little more than one).  A yielding storey's drift is
-        monotonic over the step, so its slip and dissipation follow from the end drift as in
+        and a yielding storey keep its drift rate's sign in every interval taken here (the
+        first interval that tier 1 cannot clear ends the batch: a step whose later intervals
+        yield keeps the batch's work on the quiet ones before, instead of redoing them one by
+        one); only the intervals where a peak may grow are looked at one by one, and in them
+        only the functions that tier 1 did not clear.  Same arithmetic as :meth:`_interval` per
+        interval up to round-off, without its per-interval overhead (a step of 30 record
+        intervals costs little more than one).  A yielding storey's drift is monotonic over the
+        intervals taken, so its slip and dissipation follow from the end drift as in
         :meth:`_commit`.
         """
         n = self.n
@@ -547,14 +558,15 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         lengths = times[1:] - times[:-1]             # np.diff's arithmetic
         _, cfg, elastic, yielding = self._mode_facts(state.mode)
         inelastic = self._inelastic
-        p = self._net_force(state, force)
         size = 3 * n + 2
         positive = lengths.tolist()
         if min(positive) > 0.0:                      # no jump: slices, the same arithmetic
+            knots = None                             # interval j starts at knot j
             ag0 = ag[:-1]
             slope = (ag[1:] - ag[:-1]) / lengths
         else:                                        # equal times: a jump, no time passes
             idx = (lengths > 0.0).nonzero()[0]
+            knots = idx.tolist()                     # the knot each positive interval starts at
             ag0 = ag[idx]
             slope = (ag[idx + 1] - ag[idx]) / lengths[idx]
             positive = lengths[idx].tolist()
@@ -565,6 +577,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             if even_times is not times:
                 return self._advance_batch(state, even_times, even_ag, force)
         count = len(positive)
+        if inelastic and yielding and not cfg.has_map(positive[0]) and cfg.segments_without_map < MAP_AFTER_SEGMENTS:
+            # a yield pattern met briefly so far: most last a few intervals (_worth_a_map), and a
+            # map costs about ten ad hoc segments; _interval takes it ad hoc until it has lasted
+            return None
+        p = self._net_force(state, force)
         first = cfg.segment_map(positive[0])
         # one length (to round-off) for every interval: canonical_length is monotonic, so the
         # shortest and the longest sharing a map means all do (every step of a run, measured)
@@ -596,14 +613,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             for j in range(count - 1):
                 np.matmul(maps[j].state, Y[j], out=Y[j + 1, :two_n])
             z = maps[-1].state @ Y[-1]
-        e_damp = e_in = 0.0
-        flagged = []
-        peaks = state.peaks
-        drift_bounds = []                # (intervals, tier-1 bounds, flags) of each group
-        drift_flagged = False
+        tested = []                      # (intervals, map, their rows, tier-1 values, bounds) of each group
+        taken = count                    # intervals before the first one tier 1 cannot clear of events
         for js in groups.values():
             smap = maps[js[0]]
-            _, tier1, change, forms, _ = self._batch_plan(smap)
+            tier1, change = self._batch_plan(smap)[1:3]
             # the rows of the group, as a slice where they are consecutive (a view, not a copy)
             Yg = Y[js[0]:js[-1] + 1] if js[-1] - js[0] == len(js) - 1 else Y[js]
             # per interval only what tier 1 needs (a product small enough for one BLAS thread:
@@ -620,7 +634,30 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 else:     # every storey elastic: np.where's first branch, fewer operations
                     margin = self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n]
                 if not margin.min() > 0.0:
-                    return None
+                    # the group's first interval that an event may end (the groups' intervals ascend)
+                    taken = min(taken, js[int((~(margin.min(axis=1) > 0.0)).argmax())])
+                    if taken == 0:
+                        return None
+            tested.append((js, smap, Yg, out, bound))
+        if taken < count:
+            # the step goes on from the start of interval `taken` (its start state is Y's row)
+            count = taken
+            z = Y[count, :two_n]
+            positive = positive[:count]
+            Y = Y[:count]
+            kept = []
+            for js, smap, Yg, out, bound in tested:
+                k = sum(1 for j in js if j < count)          # the groups' intervals ascend
+                if k:
+                    kept.append((js[:k], smap, Yg[:k], out[:k], bound[:k]))
+            tested = kept
+        e_damp = e_in = 0.0
+        flagged = []
+        peaks = state.peaks
+        drift_bounds = []                # (intervals, tier-1 bounds, flags) of each group
+        drift_flagged = False
+        for js, smap, Yg, out, bound in tested:
+            forms = self._batch_plan(smap)[3]
             # both energy forms summed over the group's intervals: sum_j y_j' Q y_j = <Q, Y'Y>
             e_damp_g, e_in_g = (forms @ (Yg.T @ Yg).ravel()).tolist()
             e_damp += e_damp_g
@@ -672,7 +709,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             self._yield_along(state, u1)
         state.u = u1
         state.v = z[n:]
-        return cost
+        last = times.size - 1
+        return cost, times, ag, (last if count == len(maps) else count if knots is None else knots[count])
 
     def _interval_peaks(self, cfg, state, Y, scans, flags, p, length, xtol, cost) -> None:
         """:meth:`_peaks` of consecutive intervals of one length, in order: ``Y`` their ``y``

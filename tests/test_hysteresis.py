@@ -680,3 +680,48 @@ def test_peak_shear_of_an_elastic_storey_between_events_is_k_times_its_peak_drif
     # both located to the searches' tolerance (PEAK_RTOL relative)
     np.testing.assert_allclose(peak, exact, rtol=1e-9)
     assert np.max(1.0 - ends / exact) > 1e-2
+
+
+def test_a_yielding_knot_step_equals_its_intervals_one_by_one(monkeypatch):
+    """A bilinear building's steps of 15 record intervals (the batch up to the first interval
+    where an event may occur, the rest interval by interval) against one call per interval:
+    the same states, yield patterns, slips, energies and peaks to round-off.  The run must
+    contain steps that the batch takes only in part, and steps in which it takes nothing."""
+    import fmu_src.building_response as response
+    taken = []
+    batch = response.ExactPiecewiseLinear._advance_batch
+
+    def recording(self, state, times, ag, force):
+        result = batch(self, state, times, ag, force)
+        taken.append(None if result is None else (result[3], result[1].size - 1))
+        return result
+    monkeypatch.setattr(response.ExactPiecewiseLinear, "_advance_batch", recording)
+    rec = el_centro(0.4)
+    n = 4
+    b = ShearBuilding.from_period(0.8, [3e5] * n, [1.0, 0.9, 0.7, 0.5], 0.05)
+    fy = np.array([0.3, 0.25, 0.2, 0.12]) * 3e5 * n * G
+    force = np.array([0.0, 1e4, 0.0, -2e4])
+    long_it = integrator_for(b, StoreyHysteresis("bilinear", fy, 0.05))
+    short_it = integrator_for(b, StoreyHysteresis("bilinear", fy, 0.05))
+    a = long_it.initial_state(np.zeros(n), np.zeros(n))
+    s = short_it.initial_state(np.zeros(n), np.zeros(n))
+    events = 0
+    for i in range(40):
+        t0, t1 = 1.0 + 0.3 * i, 1.0 + 0.3 * (i + 1)
+        kt, ka = step_knots(rec, t0, t1)
+        events += long_it.advance(a, kt - t0, ka, force).events
+        for j in range(kt.size - 1):
+            short_it.advance(s, [0.0, kt[j + 1] - kt[j]], [ka[j], ka[j + 1]], force)
+    partial = sum(1 for t in taken if t is not None and 0 < t[0] < t[1])
+    assert events > 20 and partial > 3 and taken.count(None) > 3, (events, partial, taken.count(None))
+    long_it.resolve_peaks(a)
+    short_it.resolve_peaks(s)
+    np.testing.assert_array_equal(a.mode, s.mode)
+    scale = np.abs(s.u).max()
+    # the event times are located to 1e-12 of the step (EVENT_XTOL): the states agree to that
+    np.testing.assert_allclose(a.u, s.u, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(a.slip, s.slip, rtol=0, atol=1e-9 * scale)
+    for key in ("E_input", "E_damping", "E_external", "E_hysteretic"):
+        assert getattr(a, key) == pytest.approx(getattr(s, key), rel=1e-9)
+    np.testing.assert_allclose(a.peaks, s.peaks, rtol=1e-9)
+    np.testing.assert_allclose(a.peak_shear, s.peak_shear, rtol=1e-9)
