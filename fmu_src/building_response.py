@@ -1384,21 +1384,25 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         return self.configuration(np.frombuffer(key, dtype=bool).astype(np.int64))
 
     # -- the linear zero-order-hold step computed elsewhere (building_slave) -------------------
-    def legacy_rows(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For a zero-order-hold step ``h`` of the elastic building acting on ``y = [u0; v0; ag; f]``:
-        ``(start, scan, reach)``: ``start @ y = [Re W z'(0); Im W z'(0); watched functions at 0
-        (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector, and ``reach @ |start @ y|``
-        the tier-1 bound of every watched function over the step (its value at 0 plus the
-        change bound acting on ``|Re| + |Im|``, an upper bound of the modal amplitude)."""
+    def legacy_rows(self, h: float, step_matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For a zero-order-hold step ``h`` of the elastic building acting on ``y = [u0; v0; ag; f]``
+        whose end state is ``step_matrix @ y`` (``[u1; v1]``, the building's step matrix of
+        ``h``): ``(start, scan, reach)``: ``start @ y = [Re W z'(0); Im W z'(0); watched functions
+        at 0 (accel with f/m)]``, ``scan @ y`` the :class:`Scan` vector, and ``reach @ |start @
+        y|`` the tier-1 bound of every watched function over the step (its value at 0 plus the
+        change bound acting on ``|Re| + |Im|``, an upper bound of the modal amplitude).  No
+        segment map (its energy forms are the step matrix's business): the scan rows from the
+        step matrix, the change bound in closed form."""
         cfg = self.configuration(np.zeros(self.n, dtype=np.int64))
-        smap = cfg.segment_map(h)
         n = self.n
-        drop = 2 * n + 1     # the ag1 column: a zero-order hold has no ramp
-        scan = np.delete(smap.scan, drop, axis=1)
+        drop = 2 * n + 1     # the ag1 column: a zero-order hold has no ramp (any value there is dropped)
+        state_map = np.insert(step_matrix, drop, 0.0, axis=1)
+        scan = np.delete(cfg.scan_rows(state_map, h), drop, axis=1)
+        change, _ = cfg.change_bounds(h)
         watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
         watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)
         start = np.ascontiguousarray(np.vstack([scan[-4 * n:], watch[:3 * n]]))
-        reach = np.ascontiguousarray(np.hstack([smap.change[:3 * n], np.eye(3 * n)]))
+        reach = np.ascontiguousarray(np.hstack([change[:3 * n], np.eye(3 * n)]))
         return start, np.ascontiguousarray(scan), reach
 
     def legacy_peaks(self, state, y_zoh: np.ndarray, start_values: np.ndarray, scan_rows: np.ndarray,

@@ -21,8 +21,8 @@ through ``(t_knot[k], ag_knot[k])`` which must cover the step ``[t, t+h]`` (feed
 FMU's knots of the same step; ``ag`` is then ignored).
 
 Integration (``fmu_src/building_response.py``): exact for linear and bilinear storeys (the
-linear zero-order-hold step is one matrix-vector product with the matrix of earlier versions,
-cached per step length to round-off (``linear_response.canonical_length``); the first step of
+linear zero-order-hold step is one matrix-vector product with a matrix from the building's modes
+in closed form (``shear_building.ModalZohPropagator``, no matrix exponential), cached per step length to round-off (``linear_response.canonical_length``); the first step of
 a length, which a run may take only once, from the modal solution instead of building that
 matrix; otherwise the modal solution with yield and unloading events located inside the step,
 a step over several record intervals of one length in one product, a step of one record
@@ -48,7 +48,7 @@ from .fmi_slave import SlaveBase as Fmi2Slave, SlaveError, Variable, array
 from .hysteresis import BOUC_WEN_MAX_N, HYSTERESIS_MODELS, StoreyHysteresis
 from .linear_response import canonical_length
 from .record_knots import KNOT_CAPACITY
-from .shear_building import DAMPING_MODELS, ShearBuilding, ZohPropagator
+from .shear_building import DAMPING_MODELS, ModalZohPropagator, ShearBuilding, ZohPropagator
 
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64          # step matrices by canonical step length
@@ -341,8 +341,8 @@ class Building(Fmi2Slave):
         None at the first step of that length in this history: that step is taken from the modal
         solution without building matrices (``ExactPiecewiseLinear.advance_unmapped``).  A length a
         run steps once (the tail of a record: 0.02 to 0.16 s, one step each) would cost more to
-        build (expm of the doubled system and the quadrature of the energy forms: 1 to 60 ms for
-        15 storeys, measured) than its step; from its second step on, the matrices pay.  Which
+        build (the closed-form step matrix with its damping form's quadrature, and the rows of the
+        in-step peak search) than its step; from its second step on, the matrices pay.  Which
         lengths were stepped is part of the FMU state, so a restored state takes the same paths."""
         entry = self._step_aliases.get(step_size)
         if entry is None:
@@ -378,11 +378,22 @@ class Building(Fmi2Slave):
         and the matrices of the in-step peak search (``ExactPiecewiseLinear.legacy_rows``).
 
         ``y = [u0; v0; ag; f]``; ``Q`` is the exact damping-energy form (``E_damping = y' Q y``).
-        Everything a step needs is one matrix-vector product and three dot products.
+        Everything a step needs is one matrix-vector product and three dot products.  The step
+        matrix and ``Q`` from the building's modes in closed form (``ModalZohPropagator``: no
+        matrix exponential per new step length); a free mass (no oscillating mode) keeps the
+        block exponential (``ZohPropagator``), bit for bit as before.
         """
         b, n = self._building, self._n
+        asked = h if asked is None else asked
         with np.errstate(over="ignore", invalid="ignore"):   # an overflow is refused below, in one message
-            prop = ZohPropagator(b, h)
+            if self._free_mass:
+                prop = ZohPropagator(b, h)
+            else:
+                try:
+                    prop = ModalZohPropagator(b, h)
+                except ValueError as exc:
+                    raise SlaveError(f"a step of h = {asked!r} s is beyond what the building's arithmetic supports "
+                                     f"({exc}); use a shorter step") from None
             S = prop.step_matrix                       # [u1; v1] = S y
             Su = S[:n]
             accel = self._R @ S
@@ -395,11 +406,10 @@ class Building(Fmi2Slave):
             # the block exponential (and Van Loan's damping integral, which grows like
             # exp(2 zeta w h)) overflows: no step of this length can be computed
             fastest = float(np.max(b.omegas))
-            asked = h if asked is None else asked
             raise SlaveError(f"a step of h = {asked!r} s is beyond what the building's arithmetic supports (its step "
                              f"matrix overflows; fastest mode {fastest:.3g} rad/s, zeta = {b.damping_ratio:g}); "
                              f"use a shorter step")
-        peaks = None if self._free_mass else self._integrator.legacy_rows(h)
+        peaks = None if self._free_mass else self._integrator.legacy_rows(h, S)
         if len(self._steps) >= _MAX_CACHED_STEPS:
             self._steps.pop(next(iter(self._steps)))
         entry = self._steps[h] = (np.ascontiguousarray(G), peaks, h)
