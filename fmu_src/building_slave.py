@@ -22,8 +22,8 @@ FMU's knots of the same step; ``ag`` is then ignored).
 
 Integration (``fmu_src/building_response.py``): exact for linear and bilinear storeys (the
 linear zero-order-hold step is one matrix-vector product with a matrix from the building's modes
-in closed form (``shear_building.ModalZohPropagator``, no matrix exponential), cached per step length to round-off (``linear_response.canonical_length``); the first step of
-a length, which a run may take only once, from the modal solution instead of building that
+in closed form (``shear_building.ModalZohPropagator``, no matrix exponential), cached per step
+length to round-off (``linear_response.canonical_length``); the first step of a length, which a run may take only once, from the modal solution instead of building that
 matrix; otherwise the modal solution with yield and unloading events located inside the step,
 a step over several record intervals of one length in one product, a step of one record
 interval in one product with a matrix cached per length, like the zero-order hold's); Bouc-Wen
