@@ -80,7 +80,11 @@ MAX_EVENTS_PER_STEP = 10000  # a bound on yield/unloading events in one communic
 MAX_CONFIGURATIONS = 256    # cached stiffness configurations per building
 MAX_PLANS = 16              # segment maps with a batch plan (ExactPiecewiseLinear._batch_plan) per building
 MAX_CHAINS = 8              # interval counts with a chain (ExactPiecewiseLinear._chain) per plan
-MAP_AFTER_SEGMENTS = 2      # ad hoc segments of a yield pattern before its segment map is built
+# ad hoc segments of a yield pattern before its segment map is built: about what the map costs
+# (ten ad hoc segments, _worth_a_map), so a pattern never costs more than twice the cheaper of
+# the two ways (rent-or-buy); kasai_maison_inelastic's building replay (loaded, best of 3):
+# 2 -> 80 maps built, 657 ms; 8 -> 27 maps, 607 ms; 16 -> 10 maps, 604 ms
+MAP_AFTER_SEGMENTS = 8
 MAX_SPLIT_INTERVALS = 32    # intervals a step's long intervals are split into at most (_even_intervals)
 # a knot interval shorter than this fraction of its step is a sliver left by the round-off of
 # knot times (2e-12 of a 10 ms step measured), taken as a jump (_even_intervals)
@@ -959,7 +963,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         segment map of its length (built now if missing) rather than ad hoc.  A map costs about
         as much as ten ad hoc segments (15 storeys: 1.4 ms against 0.1-0.2 ms, loaded), and in a
         tall building most yield patterns last a few intervals (kasai_maison_inelastic: 227
-        patterns, 85 of them met in one or two intervals): a pattern gets its map from its
+        patterns, 85 of them met in one or two intervals, 27 met more than 8 times): a pattern
+        gets its map from its
         ``MAP_AFTER_SEGMENTS + 1``-th segment on; the elastic one at once."""
         if all_elastic or cfg.has_map(length):
             return True
