@@ -58,7 +58,7 @@ import numpy as np
 
 from ...fmus import POUNDING, fmu_spec
 from ..dormancy import Dormancy
-from ..gap_bound import OpenGaps, constant_bound, running_max_abs
+from ..gap_bound import GroundAhead, OpenGaps, constant_bound
 from ..guard import contact_levels
 from ..knots import GroundLookahead
 from .base import CouplingStrategy
@@ -366,7 +366,7 @@ class Adaptive(CouplingStrategy):
         look = self._look
         look.cover(t + H)
         times, values = look.times, look.values     # replaced, never changed in place, by the look-ahead
-        return lambda: running_max_abs(times, values, t, H)
+        return GroundAhead(times, values, t, H)
 
     def _prove_quiet(self, t: float, H: float) -> float:
         """With no contact active: how long (s, <= H) every gap provably stays open from ``t``
