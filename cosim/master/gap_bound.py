@@ -130,6 +130,7 @@ GROUND_ROUNDOFF = 1e-12
 _PAIRS_KEPT = 256
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
 _POINTS = np.arange(GRID + 1, dtype=float)
+_ZERO = np.zeros(1)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
@@ -1075,21 +1076,18 @@ class GroundAhead:
         times, values, t0 = self.times, self.values, self.t0
         s = t0 + _grid(self.H)
         g = _interp(s, times, values)
-        rest = np.zeros(GRID + 1)
         lo = times.searchsorted(s[0], "right")
         hi = times.searchsorted(s[-1], "left")
         if hi > lo:
             knots = times[lo:hi]
-            where = s.searchsorted(knots, "right")        # s[where - 1] <= knot < s[where]
-            where -= 1
-            left = s[where]
-            chord = g[where] + (g[where + 1] - g[where]) * ((knots - left) / (s[where + 1] - left))
-            bend = np.abs(values[lo:hi] - chord)
+            # the bend at each knot: its value less g_grid's there (the chord of its grid interval)
+            bend = values[lo:hi] - _interp(knots, s, g)
+            np.abs(bend, out=bend)
             _MAX.accumulate(bend, out=bend)
-            # grid point k: the largest bend of the knots before it
-            before = knots.searchsorted(s[1:], "left")
-            inside = before > 0
-            rest[1:][inside] = bend[before[inside] - 1]
+            # grid point k: the largest bend of the knots before it (none: 0)
+            rest = np.concatenate((_ZERO, bend))[knots.searchsorted(s, "left")]
+        else:
+            rest = np.zeros(GRID + 1)
         size = np.abs(g)
         rest += GROUND_ROUNDOFF * float(size.max(initial=0.0))
         # int_0^s_k |g_grid|: on each interval at most the mean of its ends' sizes (exact where g
