@@ -220,3 +220,66 @@ def test_ground_between_the_grid_points_moves_the_floors():
     gaps = OpenGaps(buildings, [("left", 2, "right", 2, gap)])
     got = gaps.horizons(np.zeros(16), H, GroundAhead(times, values, 0.0, H))[0]
     assert got <= closing
+
+
+def elastic_buildings(rng, alpha):
+    """The default_inelastic scene's two buildings (tests/test_gap_bound_yielding.py) in random
+    elastic states: slips of up to a yield drift, every storey inside its elastic range, drift
+    rates of 0.01 to 0.1 m/s; ``y`` laid out as (x, v, residual drift) per building."""
+    from cosim.master.gap_bound import ElasticRange
+    from fmu_src.hysteresis import StoreyHysteresis
+    from test_gap_bound_yielding import LEFT, RIGHT, building as scene_building
+    buildings, elastic, yielded, y, states = {}, {}, {}, [], []
+    offset = 0
+    for name, spec in (("left", LEFT), ("right", RIGHT)):
+        b, fy = scene_building(spec)
+        law = StoreyHysteresis("bilinear", fy, alpha)
+        n = b.n
+        dy = law.yield_drift(b.stiffnesses)
+        slip = rng.uniform(-1.0, 1.0, n) * dy
+        u0 = np.cumsum(slip + rng.uniform(-0.5, 0.5, n) * dy)
+        v0 = np.cumsum(rng.uniform(0.01, 0.1, n) * np.where(rng.random(n) < 0.5, -1.0, 1.0))
+        ix, iv, ir = (offset + np.arange(n) + k * n for k in range(3))
+        offset += 3 * n
+        buildings[name] = (ModalBound(b), ix, iv)
+        elastic[name] = ElasticRange(alpha, law.yield_drift(b.stiffnesses), ir)
+        yielded[name] = ModalBound.through_yielding(b, alpha, fy)
+        y += [u0, v0, (1.0 - alpha) * slip]
+        states.append((b, law, u0, v0, slip, np.zeros(n, dtype=np.int64)))
+    return buildings, elastic, yielded, np.concatenate(y), states
+
+
+@pytest.mark.parametrize("alpha", (0.0, 0.05, 0.5))
+def test_exact_proof_of_yielding_buildings_is_a_proof(alpha):
+    """Two bilinear buildings (the default_inelastic scene's, tests/test_gap_bound_yielding.py's
+    oracle: building.fmu's exact motion through yielding), elastic or yielding: with the ground
+    ahead the proof computes its response while both buildings are proven elastic
+    (_BilinearPair), and through yielding keeps the bound of the whole ground.  The gap stays
+    open over the proven horizon, for gaps from wide to just below what the motion reaches; on
+    elastic states the exact proof is longer than the bounded one in most open cases."""
+    from test_gap_bound_yielding import H, exact_motion, record_window, two_buildings
+    rng = np.random.default_rng(31 + int(100 * alpha))
+    longer = cases = 0
+    for case in range(12):
+        make = elastic_buildings if case % 3 else two_buildings
+        buildings, elastic, yielded, y, states = make(rng, alpha)
+        knots, values = record_window(rng)
+        (bl, lawl, ul, vl, sl, ml), (br, lawr, ur, vr, sr, mr) = states
+        dense = np.linspace(0.0, H, 661)
+        left = exact_motion(bl, lawl, ul, vl, sl, ml, knots, values, np.zeros(3), dense)[0]
+        right = exact_motion(br, lawr, ur, vr, sr, mr, knots, values, np.zeros(5), dense)[0]
+        rel = left[:, 2] - right[:, 2]
+        for gap in (float(rel.max() + rng.uniform(0.001, 0.02)), float(rel.max() - 1e-4)):
+            if gap <= rel[0]:
+                continue
+            levels = [("left", 2, "right", 2, gap)]
+            gaps = OpenGaps(buildings, levels, elastic, yielded)
+            assert gaps.stacked
+            proven = gaps.horizons(y, H, GroundAhead(knots, values, 0.0, H))[0]
+            bounded = OpenGaps(buildings, levels, elastic, yielded).horizons(
+                y, H, running_max_abs(knots, values, 0.0, H))[0]
+            assert np.all(rel[dense <= proven] - gap < 0.0), (case, gap, proven)
+            if gap > rel.max() and make is elastic_buildings:
+                cases += 1
+                longer += proven > bounded
+    assert cases and longer >= cases / 2, (longer, cases)

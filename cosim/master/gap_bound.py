@@ -748,6 +748,12 @@ class _BilinearPair:
         self._motion: dict = {}         # H -> the free linear motion of this state
         self._yielded_state = None      # the modal state of the bounds through yielding (when asked)
         self._yielded_motion: dict = {}  # H -> their free motion
+        # the ground's response computed while both buildings are proven linear (_ExactPair's
+        # argument, about the static shift): every mode has stiffness
+        self.stiff = bool(np.all(bl.w > 0.0) and np.all(br.w > 0.0))
+        if self.stiff:
+            self._rows_gain = np.concatenate((bl.abs_rows @ np.abs(bl.gamma), br.abs_rows @ np.abs(br.gamma)))[:, None]
+        self._row_kernels: dict = {}    # H -> every row's ground kernel, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
         tables = self._by_h.get(H)
@@ -808,10 +814,25 @@ class _BilinearPair:
         self._yielded_state = None
         self._yielded_motion = {}
 
-    def _linear(self, H: float, ground: np.ndarray) -> tuple:
-        """``(F, forced, (s_left, s_right))``: the linear motion of both buildings about their
-        shifts (:class:`FloorMotion`; the free part kept per state and horizon, the forced part of
-        this ground bound) and how long each provably stays linear (0 while yielding)."""
+    def _kernels(self, H: float) -> np.ndarray:
+        kernels = self._row_kernels.get(H)
+        if kernels is None:
+            if len(self._row_kernels) > 16:
+                self._row_kernels.pop(next(iter(self._row_kernels)))
+            parts = []
+            for bound in self.bounds:
+                modal = bound.ground_kernels(H)
+                parts.append((bound.rows @ modal.reshape(bound.n, -1)).reshape(-1, GRID + 1))
+            kernels = self._row_kernels[H] = np.vstack(parts)
+        return kernels
+
+    def _linear(self, H: float, ground: np.ndarray, ahead: "GroundAhead | None" = None) -> tuple:
+        """``(F, forced, (s_left, s_right), rate)``: the linear motion of both buildings about
+        their shifts (:class:`FloorMotion`; the free part kept per state and horizon, the forced
+        part of this ground bound) and how long each provably stays linear (0 while yielding);
+        ``rate`` the rows' rate bounds (per row, or per row and interval).  With the ground
+        ahead (``ahead``), its response to the grid polyline is computed and only the bend
+        between grid points bounded, the rate bound growing with the load (:class:`_ExactPair`)."""
         yielding, shift, u, v, q, b, rate, lo, hi = self._state
         Ac, As, rows_ground = self._tables(H)
         (bl, br), nl, n = self.bounds, self.nl, self.n
@@ -825,16 +846,24 @@ class _BilinearPair:
             if len(self._motion) > 8:
                 self._motion.pop(next(iter(self._motion)))
             self._motion[H] = F
-        forced = rows_ground * ground
-        # band_horizon of both buildings' storeys at once (each building's answer its own)
+        dS = H / GRID
         rows = self.drift_rows
+        if ahead is None:
+            forced = rows_ground * ground
+            slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
+        else:
+            g, rest, integral = ahead.on_grid()
+            F = F + (self._kernels(H) @ g).reshape(2 * self.n, GRID + 1)
+            forced = rows_ground * rest
+            rate = rate[:, None] + self._rows_gain * integral[1:]
+            slack = 0.5 * dS * rate[rows] + forced[rows, 1:]
+            slack += EXACT_MARGIN
+        # band_horizon of both buildings' storeys at once (each building's answer its own)
         D = F[rows]
         x0 = D[:, 0]
         inside = _AND(x0 > lo, x0 < hi)
-        dS = H / GRID
         mid = D[:, :-1] + D[:, 1:]
         mid *= 0.5
-        slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
         bad = mid + slack >= hi[:, None]
         bad |= mid - slack <= lo[:, None]
         spans = []
@@ -845,7 +874,7 @@ class _BilinearPair:
             first_bad = _ANY(bad[part], axis=0)
             first = int(first_bad.argmax())
             spans.append(float(first) * dS if first_bad[first] else H)
-        return F, forced, tuple(spans)
+        return F, forced, tuple(spans), rate
 
     def _through(self, H: float, ground: np.ndarray) -> tuple:
         """``(free, forced, rate)`` of both buildings' floors through yielding
@@ -880,13 +909,19 @@ class _BilinearPair:
         forced = forced + plastic
         return free, forced, rate
 
-    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, out: list) -> None:
-        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+    def prove(self, y: np.ndarray, H: float, ground, out: list, ahead: "GroundAhead | None" = None) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`).
+        ``ground`` bounds ``|ag|`` on the grid, or with ``ahead`` (the ground ahead, whose response
+        the linear proof then computes) returns that bound when called."""
         self._read(y)
         yielding, shift, _, _, _, _, rate, _, _ = self._state
         dS = H / GRID
         positions = self.positions
-        F, forced, (s_l, s_r) = (None, None, (0.0, 0.0)) if yielding[0] and yielding[1] else self._linear(H, ground)
+        if yielding[0] and yielding[1]:
+            F, forced, (s_l, s_r) = None, None, (0.0, 0.0)
+        else:
+            F, forced, (s_l, s_r), rate = self._linear(H, ground, ahead)
+        exact = ahead is not None and F is not None
         if s_l != 0.0 and s_r != 0.0:
             s = min(s_l, s_r)
             fl, Fl, Fr, Sr = self.fl, self.F_l, self.F_r, self.S_r
@@ -895,9 +930,14 @@ class _BilinearPair:
             delta = xl - xr - self.gap
             upper = delta[:, :-1] + delta[:, 1:]
             upper *= 0.5
-            upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
+            if exact:
+                upper += 0.5 * dS * (rate[Fl] + rate[Fr])
+            else:
+                upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
             upper += forced[Fl, 1:]
             upper += forced[Fr, 1:]
+            if exact:
+                upper += EXACT_MARGIN
             bad = upper >= 0.0
             first = bad.argmax(axis=1).tolist()
             hit = _ANY(bad, axis=1).tolist()
@@ -911,7 +951,7 @@ class _BilinearPair:
         # through yielding (OpenGaps._through_yielding): each floor's envelope, the tighter of its
         # linear bound (over the intervals its building provably stays linear) and its bound
         # through yielding (any time)
-        free_y, forced_y, rate_y = self._through(H, ground)
+        free_y, forced_y, rate_y = self._through(H, ground() if ahead is not None else ground)
         nl = self.nl
         fl, fr = self.fl[short], self.fr[short]
         half = 0.5 * dS
@@ -927,7 +967,9 @@ class _BilinearPair:
             for x, f_end, r, valid in edges:
                 mid = x[:, :-1] + x[:, 1:]
                 mid *= 0.5
-                slack = (half * r)[:, None] + f_end
+                slack = (half * r if r.ndim == 2 else (half * r)[:, None]) + f_end
+                if r.ndim == 2:
+                    slack += EXACT_MARGIN
                 edge = mid + slack if sign > 0.0 else slack - mid
                 if valid < GRID:
                     edge[:, valid:] = np.inf
@@ -1289,7 +1331,10 @@ class OpenGaps:
         fast = self._bilinear_plan(which) if self.stacked else [None] * len(pairs)
         for k, (left, right, positions, fl, fr, gap) in enumerate(pairs):
             if fast[k] is not None and left not in forces and right not in forces:
-                fast[k].prove(y, H, ground_bound(), out)     # the same arithmetic, stacked
+                # the same arithmetic, stacked; with the ground ahead known, its response computed
+                ahead = ground if (EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
+                                   and fast[k].stiff) else None
+                fast[k].prove(y, H, ground_bound() if ahead is None else ground_bound, out, ahead)
                 continue
             if prove_linear(left) != 0.0 and prove_linear(right) != 0.0:
                 s = min(linear[left], linear[right])
