@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.master.coupling.adaptive import Adaptive, closure_time
+from cosim.master.coupling.adaptive import Adaptive, closure_time, proof_horizon
 from cosim.master.guard import InstabilityError, StabilityGuard
 from cosim.master.coupling import STRATEGIES, get_strategy
 from cosim.master.simulate import simulate
@@ -239,3 +239,25 @@ def test_a_proof_that_ends_where_the_step_needs_it_allows_it(monkeypatch, t, lev
     assert strategy._long_level(t) == level
     monkeypatch.setattr(adaptive, "PROOF_SLACK", 0.0)
     assert strategy._long_level(t) > level
+
+
+def test_proof_horizon_is_one_value_per_level_and_covers_the_step():
+    """A proof over a step spans the step's nominal length: the round-off variants of a step
+    (t_next - t from tick counts, as Adaptive.step computes it) share one horizon, never
+    shorter than the step itself (a shorter horizon would leave the step's end unproven)."""
+    h_base = 0.01
+    h_min = h_base / 2 ** 16
+    for level in range(0, 5):
+        nominal = h_base * 2.0 ** -level
+        ticks = 1 << (16 - level)
+        variants = {(t0 + (k + ticks) * h_min) - (t0 + k * h_min)
+                    for t0 in (0.0, 0.3, 7.0) for k in range(0, 40 * 2 ** 16, 7919 * ticks)}
+        assert len(variants) > 1                        # the round-off this guards against is real
+        horizons = {proof_horizon(h, nominal, h_base) for h in variants}
+        assert len(horizons) == 1
+        H = horizons.pop()
+        assert H >= max(variants)
+        assert H - nominal <= 1e-9 * h_base * (1 + 1e-6)   # only the stated slack beyond the step
+    # a step longer than its nominal length plus the slack (impossible from step(), but not
+    # assumed) keeps its own length
+    assert proof_horizon(0.02, 0.01, 0.01) == 0.02

@@ -30,7 +30,11 @@ def test_only_the_instances_the_scene_calls_for(default_run):
     # near a possible contact, dyadic refinements only around the impacts (11 here)
     steps = summary.cost.communication_steps
     stats = result.stats
-    assert summary.stop_time_s == 40.0 and 400 < steps < 1000 and stats["long_steps"] > steps / 2
+    assert summary.stop_time_s == 40.0 and 300 < steps < 1000 and stats["long_steps"] > 100
+    # most of the run in long steps (measured 37.6 of the 40 s since the proof computes the
+    # ground's response, 411 steps; the rest are 10 ms steps in sustained contact)
+    h_all = np.diff(result.time)
+    assert h_all[h_all > 0.01 * (1 + 1e-9)].sum() > 0.75 * 40.0
     # the buildings step with every step; the ground motion is read ahead in chunks of up to
     # 0.32 s (knots); the contact sleeps where its gap provably stays open and catches up in
     # steps of at most 40 ms (cosim/master/dormancy.py): fewer calls than 10 ms steps would make

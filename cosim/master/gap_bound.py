@@ -111,10 +111,26 @@ _COSH_SAFE = 300.0
 #: building.fmu's Runge-Kutta integrator (rtol 1e-8) stays within 1e-8 of it (measured: at most
 #: ``z_u`` to round-off under El Centro at 0.4 g, n = 1 to 10)
 BOUC_WEN_Z_MARGIN = 1e-4
+#: absolute slack (m) on a gap proven with the ground's exact response (:class:`_ExactPair`): the
+#: computed motion's round-off (closed forms cancel to ~1e-11 of a ramp response over one grid
+#: interval, ~1e-13 m; the FMU's own to ~1e-15 of the displacements), far below it, and it is
+#: far below any gap
+EXACT_MARGIN = 1e-9
+#: linear buildings' proofs compute the ground's response (:class:`_ExactPair`) where the ground
+#: motion ahead is known (:class:`GroundAhead`) and every mode has stiffness
+EXACT_GROUND = True
+#: shorter horizons (s) keep the bound of the whole ground: over a few hundredths of a second it
+#: is nearly as tight, and cheaper (the held forces' one-step proofs of kasai_maison, 0.01 s).
+#: Measured: default 411 -> 411 steps, kasai_maison 415 -> 416 against exact proofs everywhere
+EXACT_MIN_HORIZON = 0.04
+#: relative round-off (of the largest |ag|) added to the part of the ground a proof bounds
+#: (:meth:`GroundAhead.on_grid`): the chord through the grid values is computed to a few ulps
+GROUND_ROUNDOFF = 1e-12
 #: level groupings :meth:`OpenGaps._pairs` keeps (subsets of the levels a run asks for)
 _PAIRS_KEPT = 256
 #: the grid's point numbers ``k`` (the grid is ``s_k = H k / GRID``, computed in that order)
 _POINTS = np.arange(GRID + 1, dtype=float)
+_ZERO = np.zeros(1)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
@@ -165,6 +181,7 @@ class ModalBound:
         self.plastic_shear = None if plastic_shear is None else np.asarray(plastic_shear, dtype=float)
         self.plastic = None if plastic_shear is None else self.abs_drift_phi.T @ self.plastic_shear
         self._tables: dict[float, tuple[np.ndarray, ...]] = {}
+        self._ground_kernels: dict[float, tuple] = {}
 
     @classmethod
     def through_yielding(cls, building: ShearBuilding, alpha: float, yield_shear) -> "ModalBound":
@@ -254,6 +271,63 @@ class ModalBound:
                                  np.einsum("fik,i->fk", storey_kernels.reshape(n, n, -1), self.plastic_shear))
         out = self._tables[H] = (s, Ac, As, G, floors_ground, (self.abs_rows * gamma) @ G, plastic)
         return out
+
+    def step_response(self, H: float) -> np.ndarray:
+        """Each mode's displacement from rest under a unit modal load held from ``s = 0`` on the
+        grid ``s_k = H k / GRID`` (modes x points): ``S = (1 - Ac - zeta w As) / w^2`` (the static
+        displacement less the free motion that starts from it).  Only where every mode has
+        stiffness (:meth:`ground_kernels`)."""
+        return self._exact_tables(H)[0]
+
+    def ground_kernels(self, H: float) -> np.ndarray:
+        """Each mode's exact displacement from rest at every grid point ``s_k = H k / GRID`` under
+        a ground acceleration linear between the grid points (*Exact ground response*,
+        :class:`_ExactPair`): ``K`` (modes x points x points) with ``K @ g`` the modal
+        displacements for the grid values ``g`` (m/s^2).  Only where every mode has stiffness.
+        Cached per ``H``.
+
+        Built from closed forms of each mode's response to a unit step, ``S`` (:meth:`step_response`),
+        and to a unit ramp, ``R = (s - 2 zeta / w) / w^2 + 2 zeta / w^3 Ac + (2 zeta^2 - 1) / w^2
+        As`` (the particular solution plus the free motion that starts it from rest), with the
+        free motion's tables: a hat function on grid point ``i`` is ``(ramp(s - s_(i-1)) - 2
+        ramp(s - s_i) + ramp(s - s_(i+1))) / dS``, the first grid point's half hat ``step(s) -
+        (ramp(s) - ramp(s - dS)) / dS``."""
+        return self._exact_tables(H)[1]
+
+    def floor_kernels(self, H: float) -> np.ndarray:
+        """:meth:`ground_kernels` on the floors, ``Phi K`` (floors x points x points)."""
+        return self._exact_tables(H)[2]
+
+    def _exact_tables(self, H: float) -> tuple:
+        tables = self._ground_kernels.get(H)
+        if tables is not None:
+            return tables
+        if not np.all(self.w > 0.0):
+            raise ValueError("a mode without stiffness has no static displacement: no exact ground response")
+        cached = self._cached(H)
+        s, Ac, As = cached[0], cached[1], cached[2]
+        dS = H / GRID
+        w = self.w[:, None]
+        z = self.zeta[:, None]
+        w2 = w * w
+        S = (1.0 - Ac - self.zeta_w[:, None] * As) / w2
+        R = (s - 2.0 * z / w) / w2 + (2.0 * z / (w2 * w)) * Ac + ((2.0 * z * z - 1.0) / w2) * As
+        R[:, 0] = 0.0                                # exactly 0 at s = 0 (round-off of the closed form)
+        n = self.n
+        padded = np.concatenate((np.zeros((n, 1)), R, np.zeros((n, 1))), axis=1)   # padded[:, d + 1] = R(d)
+        full = (padded[:, 2:] - 2.0 * padded[:, 1:-1] + padded[:, :-2]) / dS      # hat at i >= 1, by d = k - i
+        full[:, -1] = 0.0                            # d = GRID would need R(GRID + 1); it does not occur
+        half = S - (padded[:, 1:-1] - padded[:, :-2]) / dS                         # half hat at i = 0, by k
+        k = np.arange(GRID + 1)
+        d = k[:, None] - k[None, :]                  # k - i (points x points)
+        kernels = np.where((d >= 0)[None], full[:, np.clip(d, 0, GRID)], 0.0)
+        kernels[:, :, 0] = half
+        kernels *= -self.gamma[:, None, None]        # modal load -Gamma_j ag
+        floors = (self.phi @ kernels.reshape(n, -1)).reshape(n, GRID + 1, GRID + 1)
+        if len(self._ground_kernels) > 16:           # a bounded number of distinct horizons
+            self._ground_kernels.pop(next(iter(self._ground_kernels)))
+        tables = self._ground_kernels[H] = (S, kernels, floors)
+        return tables
 
     def _kernel_integrals(self, H: float, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``int_0^s_k |K_r(t)| dt`` on the grid (rows x points) of the impulse responses
@@ -493,12 +567,12 @@ class _LinearPair:
         self._key = key
         self._free = {}
 
-    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, out: list) -> None:
-        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
-        self._state(y)
-        Ac, As, ground_rows = self._tables(H)
+    def _free_floors(self, H: float) -> np.ndarray:
+        """Every floor's free motion over ``H`` (both buildings stacked, floors x points), kept
+        per state (:meth:`_state`) and horizon."""
         free = self._free.get(H)
         if free is None:
+            Ac, As, _ = self._tables(H)
             q, b = self._modal
             Q = self._Q
             np.multiply(Ac, q, out=Q)
@@ -512,6 +586,13 @@ class _LinearPair:
             if len(self._free) > 8:         # a few horizons per state
                 self._free.clear()
             self._free[H] = free
+        return free
+
+    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, out: list) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+        self._state(y)
+        ground_rows = self._tables(H)[2]
+        free = self._free_floors(H)
         dS = H / GRID
         m = self.m
         # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its ends
@@ -543,6 +624,85 @@ class _LinearPair:
         for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
             if f:                               # f = 0: closed now (0 s)
                 out[pos] = min(H, float(f - 1) * dS if f <= GRID else H)
+
+
+class _ExactPair(_LinearPair):
+    """The levels between two linear buildings whose modes all have stiffness, proven with the
+    ground's response computed, not bounded (*Exact ground response*).
+
+    The ground acceleration over the horizon is the polyline of the knots read ahead
+    (:class:`GroundAhead`).  Split it into ``g_grid``, the polyline through its values at the grid
+    points, and the rest ``r = ag - g_grid`` (zero at the grid points, largest at a knot inside a
+    grid interval).  The floors' response to ``g_grid`` is exact at the grid points
+    (:meth:`ModalBound.floor_kernels`), and so is a force's held over the horizon (a step load:
+    ``phi_j' F`` times each mode's step response); with the free motion, the levels'
+    penetration is known there.  ``r``'s response is bounded as the whole ground's was
+    (``sum_j |Phi_fj Gamma_j| G_j(s) max |r|``).  Between grid points the known part exceeds the
+    mean of its ends by at most ``L dS / 2``, ``L`` a bound on its rate: ``|x_f'| <= sum_j |Phi_fj|
+    A_j`` with ``A_j = sqrt(w_j^2 q_j^2 + q_j'^2)``, which damping only lowers and the modal load
+    raises by at most its integral, so ``A_j(s) <= A_j(0) + |Gamma_j| int_0^s |g_grid| + |phi_j'
+    F| s``.  :data:`EXACT_MARGIN` covers the round-off of the computed motion."""
+
+    def __init__(self, gaps: "OpenGaps", left: str, right: str, positions: list, fl: np.ndarray,
+                 fr: np.ndarray, gap: np.ndarray):
+        super().__init__(gaps, left, right, positions, fl, fr, gap)
+        bl, br = self.bounds
+        # each level's rate gain per unit of int |g|: (|phi_l| |Gamma_l|)[fl] + (...)[fr], halved
+        # as _half_rate is (the slack is L dS / 2)
+        self._ground_gain = (0.5 * ((bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]))[:, None]
+        self._exact: dict = {}          # H -> the levels' penetration kernel (levels x points x points)
+
+    def _kernel(self, H: float) -> np.ndarray:
+        kernel = self._exact.get(H)
+        if kernel is None:
+            if len(self._exact) > 16:
+                self._exact.pop(next(iter(self._exact)))
+            bl, br = self.bounds
+            kernel = bl.floor_kernels(H)[self.fl] - br.floor_kernels(H)[self.fr]
+            kernel = self._exact[H] = kernel.reshape(self.m * (GRID + 1), GRID + 1)
+        return kernel
+
+    def prove(self, y: np.ndarray, H: float, ground: "GroundAhead", forces: dict, out: list) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+        self._state(y)
+        residual_rows = self._tables(H)[2]
+        free = self._free_floors(H)
+        g, rest, integral = ground.on_grid()
+        m = self.m
+        delta = (self._kernel(H) @ g).reshape(m, GRID + 1)
+        delta += free[self.rows_l]
+        delta -= free[self.rows_r]
+        delta -= self.gap
+        dS = H / GRID
+        # the rate bound on each interval, halved: free part, then what the ground can add by the
+        # interval's end
+        half = self._ground_gain * integral[1:]
+        half += self._half_rate
+        if forces:
+            (bl, br) = self.bounds
+            s = _grid(H)
+            for name, bound, floors, sign in ((self.left, bl, self.fl, 1.0), (self.right, br, self.fr, -1.0)):
+                force = forces.get(name)
+                if force is None or not force.any():
+                    continue
+                load = bound.phi.T @ force                       # modal load (held)
+                step = bound.step_response(H)                     # modes x points
+                moved = bound.phi[floors] @ (step * load[:, None])
+                delta += moved if sign > 0.0 else -moved
+                half += (0.5 * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]
+        upper = delta[:, :-1] + delta[:, 1:]
+        upper *= 0.5
+        half *= dS
+        upper += half
+        upper += residual_rows[:m] * rest[1:]
+        upper += residual_rows[m:] * rest[1:]
+        upper += EXACT_MARGIN
+        closed = (delta[:, 0] >= 0.0).tolist()
+        bad = upper >= 0.0
+        first = bad.argmax(axis=1).tolist()
+        hit = _ANY(bad, axis=1).tolist()
+        for pos, c, f, h in zip(self.positions, closed, first, hit):
+            out[pos] = 0.0 if c else (float(f) * dS if h else H)
 
 
 class _BilinearPair:
@@ -588,6 +748,12 @@ class _BilinearPair:
         self._motion: dict = {}         # H -> the free linear motion of this state
         self._yielded_state = None      # the modal state of the bounds through yielding (when asked)
         self._yielded_motion: dict = {}  # H -> their free motion
+        # the ground's response computed while both buildings are proven linear (_ExactPair's
+        # argument, about the static shift): every mode has stiffness
+        self.stiff = bool(np.all(bl.w > 0.0) and np.all(br.w > 0.0))
+        if self.stiff:
+            self._rows_gain = np.concatenate((bl.abs_rows @ np.abs(bl.gamma), br.abs_rows @ np.abs(br.gamma)))[:, None]
+        self._row_kernels: dict = {}    # H -> every row's ground kernel, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
         tables = self._by_h.get(H)
@@ -648,10 +814,25 @@ class _BilinearPair:
         self._yielded_state = None
         self._yielded_motion = {}
 
-    def _linear(self, H: float, ground: np.ndarray) -> tuple:
-        """``(F, forced, (s_left, s_right))``: the linear motion of both buildings about their
-        shifts (:class:`FloorMotion`; the free part kept per state and horizon, the forced part of
-        this ground bound) and how long each provably stays linear (0 while yielding)."""
+    def _kernels(self, H: float) -> np.ndarray:
+        kernels = self._row_kernels.get(H)
+        if kernels is None:
+            if len(self._row_kernels) > 16:
+                self._row_kernels.pop(next(iter(self._row_kernels)))
+            parts = []
+            for bound in self.bounds:
+                modal = bound.ground_kernels(H)
+                parts.append((bound.rows @ modal.reshape(bound.n, -1)).reshape(-1, GRID + 1))
+            kernels = self._row_kernels[H] = np.vstack(parts)
+        return kernels
+
+    def _linear(self, H: float, ground: np.ndarray, ahead: "GroundAhead | None" = None) -> tuple:
+        """``(F, forced, (s_left, s_right), rate)``: the linear motion of both buildings about
+        their shifts (:class:`FloorMotion`; the free part kept per state and horizon, the forced
+        part of this ground bound) and how long each provably stays linear (0 while yielding);
+        ``rate`` the rows' rate bounds (per row, or per row and interval).  With the ground
+        ahead (``ahead``), its response to the grid polyline is computed and only the bend
+        between grid points bounded, the rate bound growing with the load (:class:`_ExactPair`)."""
         yielding, shift, u, v, q, b, rate, lo, hi = self._state
         Ac, As, rows_ground = self._tables(H)
         (bl, br), nl, n = self.bounds, self.nl, self.n
@@ -665,16 +846,24 @@ class _BilinearPair:
             if len(self._motion) > 8:
                 self._motion.pop(next(iter(self._motion)))
             self._motion[H] = F
-        forced = rows_ground * ground
-        # band_horizon of both buildings' storeys at once (each building's answer its own)
+        dS = H / GRID
         rows = self.drift_rows
+        if ahead is None:
+            forced = rows_ground * ground
+            slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
+        else:
+            g, rest, integral = ahead.on_grid()
+            F = F + (self._kernels(H) @ g).reshape(2 * self.n, GRID + 1)
+            forced = rows_ground * rest
+            rate = rate[:, None] + self._rows_gain * integral[1:]
+            slack = 0.5 * dS * rate[rows] + forced[rows, 1:]
+            slack += EXACT_MARGIN
+        # band_horizon of both buildings' storeys at once (each building's answer its own)
         D = F[rows]
         x0 = D[:, 0]
         inside = _AND(x0 > lo, x0 < hi)
-        dS = H / GRID
         mid = D[:, :-1] + D[:, 1:]
         mid *= 0.5
-        slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
         bad = mid + slack >= hi[:, None]
         bad |= mid - slack <= lo[:, None]
         spans = []
@@ -685,7 +874,7 @@ class _BilinearPair:
             first_bad = _ANY(bad[part], axis=0)
             first = int(first_bad.argmax())
             spans.append(float(first) * dS if first_bad[first] else H)
-        return F, forced, tuple(spans)
+        return F, forced, tuple(spans), rate
 
     def _through(self, H: float, ground: np.ndarray) -> tuple:
         """``(free, forced, rate)`` of both buildings' floors through yielding
@@ -720,13 +909,19 @@ class _BilinearPair:
         forced = forced + plastic
         return free, forced, rate
 
-    def prove(self, y: np.ndarray, H: float, ground: np.ndarray, out: list) -> None:
-        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
+    def prove(self, y: np.ndarray, H: float, ground, out: list, ahead: "GroundAhead | None" = None) -> None:
+        """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`).
+        ``ground`` bounds ``|ag|`` on the grid, or with ``ahead`` (the ground ahead, whose response
+        the linear proof then computes) returns that bound when called."""
         self._read(y)
         yielding, shift, _, _, _, _, rate, _, _ = self._state
         dS = H / GRID
         positions = self.positions
-        F, forced, (s_l, s_r) = (None, None, (0.0, 0.0)) if yielding[0] and yielding[1] else self._linear(H, ground)
+        if yielding[0] and yielding[1]:
+            F, forced, (s_l, s_r) = None, None, (0.0, 0.0)
+        else:
+            F, forced, (s_l, s_r), rate = self._linear(H, ground, ahead)
+        exact = ahead is not None and F is not None
         if s_l != 0.0 and s_r != 0.0:
             s = min(s_l, s_r)
             fl, Fl, Fr, Sr = self.fl, self.F_l, self.F_r, self.S_r
@@ -735,9 +930,14 @@ class _BilinearPair:
             delta = xl - xr - self.gap
             upper = delta[:, :-1] + delta[:, 1:]
             upper *= 0.5
-            upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
+            if exact:
+                upper += 0.5 * dS * (rate[Fl] + rate[Fr])
+            else:
+                upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
             upper += forced[Fl, 1:]
             upper += forced[Fr, 1:]
+            if exact:
+                upper += EXACT_MARGIN
             bad = upper >= 0.0
             first = bad.argmax(axis=1).tolist()
             hit = _ANY(bad, axis=1).tolist()
@@ -751,7 +951,7 @@ class _BilinearPair:
         # through yielding (OpenGaps._through_yielding): each floor's envelope, the tighter of its
         # linear bound (over the intervals its building provably stays linear) and its bound
         # through yielding (any time)
-        free_y, forced_y, rate_y = self._through(H, ground)
+        free_y, forced_y, rate_y = self._through(H, ground() if ahead is not None else ground)
         nl = self.nl
         fl, fr = self.fl[short], self.fr[short]
         half = 0.5 * dS
@@ -767,7 +967,9 @@ class _BilinearPair:
             for x, f_end, r, valid in edges:
                 mid = x[:, :-1] + x[:, 1:]
                 mid *= 0.5
-                slack = (half * r)[:, None] + f_end
+                slack = (half * r if r.ndim == 2 else (half * r)[:, None]) + f_end
+                if r.ndim == 2:
+                    slack += EXACT_MARGIN
                 edge = mid + slack if sign > 0.0 else slack - mid
                 if valid < GRID:
                     edge[:, valid:] = np.inf
@@ -892,6 +1094,49 @@ def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) 
         tail = out[first:]
         _MAX(tail, prefix[k], out=tail)
     return out
+
+
+class GroundAhead:
+    """The ground motion over a proof's horizon ``[t0, t0 + H]``: the polyline through ``(times,
+    values)`` (m/s^2; the knots read ahead, :mod:`cosim.master.knots`), which must cover it.
+    Called, the bound on ``|ag|`` on the grid (:func:`running_max_abs`); :meth:`on_grid`, what
+    :class:`_ExactPair` takes."""
+
+    __slots__ = ("times", "values", "t0", "H")
+
+    def __init__(self, times: np.ndarray, values: np.ndarray, t0: float, H: float):
+        self.times, self.values, self.t0, self.H = times, values, t0, H
+
+    def __call__(self) -> np.ndarray:
+        return running_max_abs(self.times, self.values, self.t0, self.H)
+
+    def on_grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(g, rest, integral)``: the ground acceleration at the grid points ``t0 + s_k``
+        (m/s^2), ``max |ag - g_grid|`` over ``[t0, t0 + s_k]`` (m/s^2), ``g_grid`` the polyline
+        through ``g``, and a bound on ``int_0^s_k |g_grid|`` (m/s).  What lies between them is the polyline's bend at the knots inside a grid
+        interval, largest at a knot, widened by :data:`GROUND_ROUNDOFF` of the largest ``|g|``."""
+        times, values, t0 = self.times, self.values, self.t0
+        s = t0 + _grid(self.H)
+        g = _interp(s, times, values)
+        lo = times.searchsorted(s[0], "right")
+        hi = times.searchsorted(s[-1], "left")
+        if hi > lo:
+            knots = times[lo:hi]
+            # the bend at each knot: its value less g_grid's there (the chord of its grid interval)
+            bend = values[lo:hi] - _interp(knots, s, g)
+            np.abs(bend, out=bend)
+            _MAX.accumulate(bend, out=bend)
+            # grid point k: the largest bend of the knots before it (none: 0)
+            rest = np.concatenate((_ZERO, bend))[knots.searchsorted(s, "left")]
+        else:
+            rest = np.zeros(GRID + 1)
+        size = np.abs(g)
+        rest += GROUND_ROUNDOFF * float(size.max(initial=0.0))
+        # int_0^s_k |g_grid|: on each interval at most the mean of its ends' sizes (exact where g
+        # keeps its sign), times dS
+        integral = np.zeros(GRID + 1)
+        np.cumsum((0.5 * self.H / GRID) * (size[:-1] + size[1:]), out=integral[1:])
+        return g, rest, integral
 
 
 def constant_bound(value: float) -> np.ndarray:
@@ -1086,7 +1331,10 @@ class OpenGaps:
         fast = self._bilinear_plan(which) if self.stacked else [None] * len(pairs)
         for k, (left, right, positions, fl, fr, gap) in enumerate(pairs):
             if fast[k] is not None and left not in forces and right not in forces:
-                fast[k].prove(y, H, ground_bound(), out)     # the same arithmetic, stacked
+                # the same arithmetic, stacked; with the ground ahead known, its response computed
+                ahead = ground if (EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
+                                   and fast[k].stiff) else None
+                fast[k].prove(y, H, ground_bound() if ahead is None else ground_bound, out, ahead)
                 continue
             if prove_linear(left) != 0.0 and prove_linear(right) != 0.0:
                 s = min(linear[left], linear[right])
@@ -1117,13 +1365,18 @@ class OpenGaps:
         return out
 
     # -- linear buildings: the same arithmetic as :meth:`horizons`' linear proof, in fewer calls ----
-    def _linear_plan(self, which: Sequence[int] | None) -> list:
-        """Per pair of :meth:`_pairs`, a :class:`_LinearPair` (kept per grouping, as :meth:`_pairs`)."""
-        key = None if which is None else tuple(which)
+    def _linear_plan(self, which: Sequence[int] | None, exact: bool = False) -> list:
+        """Per pair of :meth:`_pairs`, a :class:`_LinearPair`, or with ``exact`` an
+        :class:`_ExactPair` where every mode of both buildings has stiffness (kept per grouping,
+        as :meth:`_pairs`)."""
+        key = (None if which is None else tuple(which), exact)
         plan = self._plans.get(key)
         if plan is not None:
             return plan
-        plan = [_LinearPair(self, *pair) for pair in self._pairs(which)]
+        plan = []
+        for pair in self._pairs(which):
+            stiff = exact and all(np.all(self.buildings[b][0].w > 0.0) for b in pair[:2])
+            plan.append((_ExactPair if stiff else _LinearPair)(self, *pair))
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
@@ -1147,12 +1400,17 @@ class OpenGaps:
         """:meth:`horizons` when every building is linear (:class:`_LinearPair`): the same
         operations in the same order as :meth:`horizons` and :class:`FloorMotion`, so the same
         horizons to the last bit."""
-        plan = self._linear_plan(which)
+        exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
+        plan = self._linear_plan(which, exact)
         out = [0.0] * sum(len(p.positions) for p in plan)
-        if callable(ground):
-            ground = ground()
+        bound = None
         for pair in plan:
-            pair.prove(y, H, ground, forces, out)
+            if isinstance(pair, _ExactPair):
+                pair.prove(y, H, ground, forces, out)
+                continue
+            if bound is None:
+                bound = ground() if callable(ground) else ground
+            pair.prove(y, H, bound, forces, out)
         return out
 
     def _through_yielding(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, prove_linear,
