@@ -227,9 +227,10 @@ class ForceShape:
       ``d = max(delta, 0)`` [m], the spring force ``k d^n`` [N], ``delta_dot`` [m/s] and the
       latched ``v_imp`` [m/s];
     * :meth:`derivatives`: ``(dF/d delta, dF/d delta_dot)`` [N/m, N s/m];
-    * :meth:`scaled_kernel`: ``f(d, u) -> (force, power)`` in the impact's scales
-      (``d = delta / L``, ``u = delta_dot / v_imp``, force ``F / (k L^n)`` clipped at 0,
-      power ``(force - d^n) u`` of the dissipative part, >= 0);
+    * :meth:`scaled_kernel`: ``f(d, u) -> force`` in the impact's scales (``d = delta / L``,
+      ``u = delta_dot / v_imp``, force ``F / (k L^n)`` clipped at 0; a bare float: the resolver
+      calls it seven times per internal step, and books the dissipated energy from the
+      trajectory's ends, not from the power);
     * :meth:`release`: ``g(d, u)`` with the sign of the scaled raw force (< 0: the force has
       been clipped, the contact has released), or None if it cannot change sign.
 
@@ -262,9 +263,9 @@ class ForceShape:
 
 
 def elastic_kernel(n: float):
-    """``f(d, u) -> (d^n, 0)``: the spring alone, scaled (no dissipation)."""
+    """``f(d, u) -> d^n``: the spring alone, scaled (no dissipation)."""
     def f(d, u):
-        return (d ** n, 0.0) if d > 0.0 else (0.0, 0.0)
+        return d ** n if d > 0.0 else 0.0
     return f
 
 
@@ -305,11 +306,9 @@ class Dashpot(ForceShape):
 
         def f(d, u):
             if d <= 0.0:
-                return 0.0, 0.0
-            s = d ** n
-            x = s + two_zeta * d ** half * u
-            x = x if x > 0.0 else 0.0
-            return x, (x - s) * u
+                return 0.0
+            x = d ** n + two_zeta * d ** half * u
+            return x if x > 0.0 else 0.0
         return f
 
     def release(self, zeta, n):
@@ -341,11 +340,9 @@ class HertzDamp(ForceShape):
     def scaled_kernel(self, zeta, n):
         def f(d, u):
             if d <= 0.0:
-                return 0.0, 0.0
-            s = d ** n
-            x = s * (1.0 + zeta * u)
-            x = x if x > 0.0 else 0.0
-            return x, (x - s) * u
+                return 0.0
+            x = d ** n * (1.0 + zeta * u)
+            return x if x > 0.0 else 0.0
         return f
 
     def release(self, zeta, n):
@@ -379,10 +376,9 @@ class Crvk(ForceShape):
 
         def f(d, u):
             if d <= 0.0:
-                return 0.0, 0.0
+                return 0.0
             s = d ** n
-            x = 0.5 * (s + math.sqrt(s * s + four_a * d ** n1))
-            return x, (x - s) * u
+            return 0.5 * (s + math.sqrt(s * s + four_a * d ** n1))
         return f
 
 
@@ -479,7 +475,7 @@ class LawSpec:
         return self.printed(CR) if self.printed is not None else self.constant(CR, n)
 
     def kernel(self, zeta: float, n: float, approaching: bool):
-        """Scaled ``f(d, u) -> (force, power)`` of the branch (see :class:`ForceShape`)."""
+        """Scaled ``f(d, u) -> force`` of the branch (see :class:`ForceShape`)."""
         if zeta == 0.0 or not self.dashpot_acts(approaching):
             return elastic_kernel(n)
         return self.shape.scaled_kernel(zeta, n)
@@ -769,4 +765,4 @@ def scaled_force(model: str, zeta: float, n: float, d: float, dd: float,
         return 0.0
     if approaching is None:
         approaching = dd > 0.0
-    return law_spec(model).kernel(zeta, n, approaching)(d, dd)[0]
+    return law_spec(model).kernel(zeta, n, approaching)(d, dd)

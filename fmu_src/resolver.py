@@ -655,7 +655,7 @@ class ImpactResolver:
             self._finish(d, u, L, v)
             out.impacts_completed += 1
             return t
-        fs = f(d, u)[0]
+        fs = f(d, u)
         acc = al0 - fs
         nfev = 1
         base = self.impact_time / T               # scaled contact time at the step start
@@ -676,7 +676,7 @@ class ImpactResolver:
                 if self.sticking:
                     break
                 f = self._kernels[self.approaching]
-                fs = f(d, 0.0)[0]
+                fs = f(d, 0.0)
                 acc = al0 + al1 * tau - fs
                 continue
             hs = min(dtau, tau_end - tau)
@@ -714,7 +714,7 @@ class ImpactResolver:
                 self.e, self.e_top = e, e_top
                 if event == "max_penetration":
                     u = 0.0
-                    f_end = f(d, 0.0)[0]
+                    f_end = f(d, 0.0)
                     nfev += self._sample(base + tau, f_end, d, u, al0 + al1 * tau - f_end, al0 + al1 * tau, al1,
                                          True, out, F0, branch_end=True)
                     self._switch_to_restitution(d, u, L)
@@ -726,7 +726,7 @@ class ImpactResolver:
                 if self.sticking:
                     continue
                 f = self._kernels[self.approaching]
-                fs = f(d, u)[0]
+                fs = f(d, u)
                 acc = al0 + al1 * tau - fs
                 nfev += 1 + self._sample(base + tau, fs, d, u, acc, al0 + al1 * tau, al1, self.approaching,
                                          out, F0)
@@ -765,8 +765,8 @@ class ImpactResolver:
         are equal at zero rate, and the band is empty)."""
         if not self._sticks:
             return False
-        f_approach = self._kernels[True](d, 0.0)[0]
-        f_restitution = self._kernels[False](d, 0.0)[0]
+        f_approach = self._kernels[True](d, 0.0)
+        f_restitution = self._kernels[False](d, 0.0)
         return f_restitution < alpha < f_approach
 
     def _stick(self, d, al0, al1, tau, tau_end, base, out, F0) -> float:
@@ -774,8 +774,8 @@ class ImpactResolver:
         branches' forces at ``d``; returns where it leaves (into approach above the upper one,
         restitution below the lower one) or ``tau_end``.  The force is ``alpha``: no work, no
         dissipation; the impulse is the external rate change (_integrate's bookkeeping)."""
-        upper = self._kernels[True](d, 0.0)[0]
-        lower = self._kernels[False](d, 0.0)[0]
+        upper = self._kernels[True](d, 0.0)
+        lower = self._kernels[False](d, 0.0)
         end = tau_end
         if al1 > 0.0:
             end = min(end, (upper - al0) / al1)
@@ -872,7 +872,7 @@ class ImpactResolver:
 
         def minus_force(x):
             dx, ux = self._dp_step(f, al, al1, d, u, acc, x, rtol, rtol)[:2]
-            return -f(dx, ux)[0]
+            return -f(dx, ux)
 
         lowest, calls = bounded_minimum(minus_force, span, 1e-7 * span)
         return -lowest, 6 * calls
@@ -881,32 +881,32 @@ class ImpactResolver:
     def _dp_step(f, al, al1, d, u, a1, hs, atol, rtol):
         """One Dormand-Prince step of ``d' = u, u' = al + al1 s - f(d, u)``; returns (d, u, u',
         force, error norm).  The dissipated energy is booked from the step's ends
-        (:meth:`_dissipated`), not integrated here: the kernels' power is not used."""
+        (:meth:`_dissipated`), not integrated here: the kernels return the force alone."""
         # stage states (d_i, u_i) and derivatives (u_i, a_i); hs * _A21 * x is (hs * _A21) * x
         h21 = hs * _A21
         d2 = d + h21 * u
         u2 = u + h21 * a1
-        f2 = f(d2, u2)[0]
+        f2 = f(d2, u2)
         a2 = al + al1 * _C2 * hs - f2
         d3 = d + hs * (_A31 * u + _A32 * u2)
         u3 = u + hs * (_A31 * a1 + _A32 * a2)
-        f3 = f(d3, u3)[0]
+        f3 = f(d3, u3)
         a3 = al + al1 * _C3 * hs - f3
         d4 = d + hs * (_A41 * u + _A42 * u2 + _A43 * u3)
         u4 = u + hs * (_A41 * a1 + _A42 * a2 + _A43 * a3)
-        f4 = f(d4, u4)[0]
+        f4 = f(d4, u4)
         a4 = al + al1 * _C4 * hs - f4
         d5 = d + hs * (_A51 * u + _A52 * u2 + _A53 * u3 + _A54 * u4)
         u5 = u + hs * (_A51 * a1 + _A52 * a2 + _A53 * a3 + _A54 * a4)
-        f5 = f(d5, u5)[0]
+        f5 = f(d5, u5)
         a5 = al + al1 * _C5 * hs - f5
         d6 = d + hs * (_A61 * u + _A62 * u2 + _A63 * u3 + _A64 * u4 + _A65 * u5)
         u6 = u + hs * (_A61 * a1 + _A62 * a2 + _A63 * a3 + _A64 * a4 + _A65 * a5)
-        f6 = f(d6, u6)[0]
+        f6 = f(d6, u6)
         a6 = al + al1 * hs - f6
         dn = d + hs * (_B1 * u + _B3 * u3 + _B4 * u4 + _B5 * u5 + _B6 * u6)
         un = u + hs * (_B1 * a1 + _B3 * a3 + _B4 * a4 + _B5 * a5 + _B6 * a6)
-        fn = f(dn, un)[0]
+        fn = f(dn, un)
         an = al + al1 * hs - fn
         ed = hs * (_E1 * u + _E3 * u3 + _E4 * u4 + _E5 * u5 + _E6 * u6 + _E7 * un)
         eu = hs * (_E1 * a1 + _E3 * a3 + _E4 * a4 + _E5 * a5 + _E6 * a6 + _E7 * an)
