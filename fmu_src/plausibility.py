@@ -77,10 +77,12 @@ class PlausibilityWatch:
                     f"previous approach speed): the host bounces the bodies back; use a smaller step "
                     f"(h = {h:.3g} s)")))
         self.steps_open = 0 if contact.in_contact else self.steps_open + 1
+        plain = isinstance(contact, PlainContact)
         if v > 0.0:
-            T = law.length_scale(v) / v
             observer = getattr(contact, "observer", None)
             debt = observer.owed() if observer is not None else 0.0
+            # the impact time scale only for a message or a plain law's checks (a power per step)
+            T = law.length_scale(v) / v if plain or debt > TIMING_ENERGY_LIMIT * energy else None
             if debt > TIMING_ENERGY_LIMIT * energy:
                 found.append(("timing_energy", (
                     f"the host received {debt:.4g} J more from the contact than the impact returns "
@@ -88,7 +90,7 @@ class PlausibilityWatch:
                     f"it applies the force later than the contact could hand it over (before the first "
                     f"impact has shown how the host applies it, or at a step of {h / T:.2g} impact time scales); "
                     f"use a smaller step (below {0.1 * T:.3g} s), or declare the host (parameter host)")))
-            if isinstance(contact, PlainContact):
+            if plain:
                 if contact.in_contact and h > PLAIN_STEP_LIMIT * T:
                     found.append(("coarse_plain_step", (
                         f"plain force law (resolve_impacts = false) stepped at h = {h:.3g} s = {h / T:.2g} impact "
@@ -102,6 +104,8 @@ class PlausibilityWatch:
                         f"damped law, dissipated {contact.last_E:.4g} J): the plain force law at h = {h:.3g} s "
                         f"({h / T:.2g} impact time scales) created energy; use resolve_impacts = true, or a step "
                         f"below {0.1 * T:.3g} s")))
+        if not found:
+            return found
         new = [(k, m) for k, m in found if k not in self.reported]
         self.reported = self.reported + tuple(k for k, _ in new)
         return new

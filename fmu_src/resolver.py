@@ -311,8 +311,10 @@ class ImpactResolver:
         if not self.follow_host:
             self.a0 = self.a1 = 0.0
             return
-        cx, cu = (float(c) for c in self.observer.observe(delta, delta_dot, h))
-        self.a0, self.a1 = float(self.observer.a0), float(self.observer.a1)
+        observer = self.observer
+        cx, cu = observer.observe(delta, delta_dot, h)
+        cx, cu = float(cx), float(cu)
+        self.a0, self.a1 = float(observer.a0), float(observer.a1)
         self.correction = (cx, cu)
         if cx == 0.0 and cu == 0.0:
             return
@@ -676,7 +678,12 @@ class ImpactResolver:
         margin = 10.0 * self.rtol
         separated = False
         switches = 0
-        while tau < tau_end * (1.0 - 1e-15):
+        substeps = 0
+        # the loop's callees and bounds as locals: it runs ~5 times per communication step
+        dp_step, sample, separation = self._dp_step, self._sample, self._separation
+        n1 = self.law.n + 1.0
+        stop = tau_end * (1.0 - 1e-15)
+        while tau < stop:
             if self.sticking:
                 tau = self._stick(d, al0, al1, tau, tau_end, base, out, F0)
                 if self.sticking:
@@ -685,22 +692,23 @@ class ImpactResolver:
                 fs = f(d, 0.0)
                 acc = al0 + al1 * tau - fs
                 continue
-            hs = min(dtau, tau_end - tau)
-            last = hs >= tau_end - tau
+            rest = tau_end - tau
+            hs = rest if rest < dtau else dtau        # min(dtau, rest), without the builtin's call
+            last = hs >= rest
             al_t = al0 + al1 * tau
-            stepped = self._dp_step(f, al_t, al1, d, u, acc, hs, atol, rtol)
+            stepped = dp_step(f, al_t, al1, d, u, acc, hs, atol, rtol)
             d1, u1, acc1, f1, err = stepped
             nfev += 6
             if err > 1.0:
                 dtau = hs * max(0.2, 0.9 * err ** -0.2)
                 continue
-            out.substeps += 1
+            substeps += 1
             event = None
             if self.approaching:
                 if u1 <= 0.0:
                     event = "max_penetration"
             else:
-                if self._separation(d1, u1) <= 0.0:
+                if separation(d1, u1) <= 0.0:
                     event = "separation"
                 if u1 > _REAPPROACH_RATE and switches < _MAX_SWITCHES_PER_STEP:
                     event = "reapproach" if event is None else self._first_event(
@@ -739,12 +747,21 @@ class ImpactResolver:
                 dtau = hs if hs > 0.0 else dtau
                 continue
             tau += hs
-            e += self._dissipated(d, u, d1, u1, al_t, al1, hs)
+            # _dissipated(d, u, d1, u1, al_t, al1, hs) written out, the same expressions
+            s0 = d ** n1 / n1 if d > 0.0 else 0.0
+            s1 = d1 ** n1 / n1 if d1 > 0.0 else 0.0
+            work = 0.0
+            if al_t != 0.0 or al1 != 0.0:
+                work = (al_t + al1 * hs) * d1 - al_t * d - al1 * hs * (0.5 * (d + d1) + hs * (u - u1) / 12.0)
+            e += 0.5 * (u * u - u1 * u1) + (s0 - s1) + work
             e_top = e - margin if e - margin > e_top else e_top
             d, u, acc = d1, u1, acc1
-            nfev += self._sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0)
+            nfev += sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0)
             if not last:
-                dtau = hs * min(5.0, 0.9 * max(err, 1e-10) ** -0.2)
+                # min(5.0, 0.9 * max(err, 1e-10) ** -0.2): the same values (NaN included)
+                grow = 0.9 * (1e-10 if 1e-10 > err else err) ** -0.2
+                dtau = hs * (grow if grow < 5.0 else 5.0)
+        out.substeps += substeps
         self.dtau = dtau
         t_used = tau * T
         self.impact_time += t_used
@@ -847,14 +864,22 @@ class ImpactResolver:
         nfev = 0
         prev = self._prev
         sample = (tau, fs, d, u, acc, approaching, al, al1)
-        same = [p for p in prev if p[5] == approaching]
+        # the earlier samples on the same branch, in order (at most the last two)
+        if len(prev) == 2:
+            first, second = prev
+            if first[5] != approaching:
+                same = (second,) if second[5] == approaching else ()
+            else:
+                same = prev if second[5] == approaching else (first,)
+        else:
+            same = prev if prev and prev[0][5] == approaching else ()
         if len(same) == 2 and same[1][1] >= same[0][1] and same[1][1] >= fs:
             p, n_ev = self._refine_peak(same[0], tau - same[0][0])
             peak, nfev = max(peak, same[1][1], p), nfev + n_ev
         if branch_end and same and fs >= same[-1][1]:
             p, n_ev = self._refine_peak(same[-1], tau - same[-1][0])
             peak, nfev = max(peak, p), nfev + n_ev
-        self._prev = (prev + (sample,))[-2:]
+        self._prev = (prev[-1], sample) if prev else (sample,)
         if self.trace is not None:
             _, L, T, _ = self._scales()
             self.trace.append((self.started, tau * T, fs * F0, d * L))
