@@ -168,9 +168,11 @@ class Pounding(Fmi2Slave):
         if self.resolve_impacts:
             out = c.step(delta, delta_dot, step_size, declared)
             F, impulse, substeps = out.mean_force, out.impulse, out.substeps
-            for notice in c.observer.notices:
-                self.log(f"{self.instance_name}: t = {current_time:.9g} s: {notice}", Fmi2Status.warning)
-            c.observer.notices.clear()
+            notices = c.observer.notices
+            if notices:
+                for notice in notices:
+                    self.log(f"{self.instance_name}: t = {current_time:.9g} s: {notice}", Fmi2Status.warning)
+                notices.clear()
         else:
             F = c.step(delta, delta_dot, step_size, declared)
             impulse, substeps = F * step_size, 1

@@ -266,6 +266,7 @@ class ImpactResolver:
         self.last_E = 0.0           # J dissipated by the latest completed impact
         self._prev = ()             # last two force samples for peak interpolation
         self._sep = (0.0, 0.0)      # (m, m/s) state at the latest separation, shifted to delta <= 0
+        self._scaled = (None,)      # _scales() of the latest v_imp, and that v_imp first
 
     def snapshot(self) -> "ImpactResolver":
         """A copy as independent as ``copy.deepcopy`` gives, for an FMU state, at a tenth of its
@@ -280,9 +281,15 @@ class ImpactResolver:
 
     # -- derived outputs -------------------------------------------------------------------
     def _scales(self):
+        """(v_imp [m/s], L [m], T [s], F0 [N]): the latest impact's scales, computed once per
+        approach speed (a power; asked for at every step, t_peak's included)."""
         v = self.v_imp
+        cached = self._scaled
+        if cached[0] == v:
+            return cached
         L = self.law.length_scale(v)
-        return v, L, L / v, self.law.m * v * v / L
+        self._scaled = scales = (v, L, L / v, self.law.m * v * v / L)
+        return scales
 
     def peak_delay(self) -> float:
         """Time (s) from the onset of the latest contact to its largest force (at the sample where
@@ -319,7 +326,7 @@ class ImpactResolver:
         if cx == 0.0 and cu == 0.0:
             return
         if self.in_contact:
-            v, L = self.v_imp, self.law.length_scale(self.v_imp)
+            v, L = self._scales()[:2]
             self.d += cx / L
             self.u += cu / v
         self.delta_end += cx
