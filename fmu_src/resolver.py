@@ -909,8 +909,7 @@ class ImpactResolver:
         rtol = self.rtol
 
         def minus_force(x):
-            dx, ux = self._dp_step(f, al, al1, d, u, acc, x, rtol, rtol)[:2]
-            return -f(dx, ux)
+            return -self._dp_step(f, al, al1, d, u, acc, x, rtol, rtol)[3]   # f at the step's end
 
         lowest, calls = bounded_minimum(minus_force, span, _PEAK_XATOL * span)
         return -lowest, 6 * calls
