@@ -687,8 +687,7 @@ class ImpactResolver:
         switches = 0
         substeps = 0
         # the loop's callees and bounds as locals: it runs ~5 times per communication step
-        dp_step, sample, separation = self._dp_step, self._sample, self._separation
-        n1 = self.law.n + 1.0
+        dp_step, sample, separation, dissipated = self._dp_step, self._sample, self._separation, self._dissipated
         stop = tau_end * (1.0 - 1e-15)
         while tau < stop:
             if self.sticking:
@@ -754,13 +753,7 @@ class ImpactResolver:
                 dtau = hs if hs > 0.0 else dtau
                 continue
             tau += hs
-            # _dissipated(d, u, d1, u1, al_t, al1, hs) written out, the same expressions
-            s0 = d ** n1 / n1 if d > 0.0 else 0.0
-            s1 = d1 ** n1 / n1 if d1 > 0.0 else 0.0
-            work = 0.0
-            if al_t != 0.0 or al1 != 0.0:
-                work = (al_t + al1 * hs) * d1 - al_t * d - al1 * hs * (0.5 * (d + d1) + hs * (u - u1) / 12.0)
-            e += 0.5 * (u * u - u1 * u1) + (s0 - s1) + work
+            e += dissipated(d, u, d1, u1, al_t, al1, hs)
             e_top = e - margin if e - margin > e_top else e_top
             d, u, acc = d1, u1, acc1
             nfev += sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0)

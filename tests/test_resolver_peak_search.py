@@ -46,13 +46,13 @@ def test_same_as_scipy_on_random_functions():
         assert bounded_minimum(scaled, upper, xatol) == scipy_minimum(scaled, upper, xatol)
 
 
-@pytest.mark.parametrize("model", ["jankowski", "crvk", "hertzdamp", "kelvin_voigt", "hertz"])
-def test_same_as_scipy_on_the_force_along_a_step(model):
-    """The search the resolver runs (_refine_peak): minus the force at the end of a DP step of
-    length x from a sample near the force peak, approaching and restituting."""
+def searches_along_a_step(model, seed):
+    """60 searches the resolver runs (_refine_peak) for a law: (resolver, sample, span,
+    minus_force) with minus_force(x) minus the force at the end of a DP step of length x from
+    a sample near the force peak, approaching and restituting."""
     law = law_for(model, 2.75e9, 1.5, 1e5, 1e5, 0.65)
     r = ImpactResolver(law)
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     for _ in range(60):
         approaching = bool(rng.integers(2))
         f = r._kernels[approaching]
@@ -62,38 +62,31 @@ def test_same_as_scipy_on_the_force_along_a_step(model):
         acc = al - f(d, u)
         span = rng.uniform(1e-3, 0.5)
 
-        def minus_force(x):
+        def minus_force(x, f=f, d=d, u=u, al=al, al1=al1, acc=acc):
             dx, ux = r._dp_step(f, al, al1, d, u, acc, x, 1e-8, 1e-8)[:2]
             return -f(dx, ux)
+        yield r, (0.0, f(d, u), d, u, acc, approaching, al, al1), span, minus_force
+
+
+@pytest.mark.parametrize("model", ["jankowski", "crvk", "hertzdamp", "kelvin_voigt", "hertz"])
+def test_same_as_scipy_on_the_force_along_a_step(model):
+    """The search the resolver runs, bit for bit as scipy's."""
+    for _, _, span, minus_force in searches_along_a_step(model, 3):
         assert bounded_minimum(minus_force, span, 1e-7 * span) == scipy_minimum(minus_force, span, 1e-7 * span)
 
 
 @pytest.mark.parametrize("model", ["jankowski", "crvk", "hertzdamp", "kelvin_voigt", "hertz"])
 def test_the_peak_search_tolerance_costs_nothing_measurable(model):
     """_refine_peak locates the maximum to _PEAK_XATOL of the span: the force it finds (or the
-    samples at the span's ends, which the resolver takes with it) is short of
-    the one a search to 1e-12 of the span finds by about F'' dx^2 / 2, at most a part
-    _PEAK_XATOL^2 of the force's variation over the span: 1e-8 at 1e-4, a hundredth of the
-    impact's own integration error (a tolerance of 1e-3 fails this bound)."""
-    law = law_for(model, 2.75e9, 1.5, 1e5, 1e5, 0.65)
-    r = ImpactResolver(law)
-    rng = np.random.default_rng(5)
-    for _ in range(60):
-        approaching = bool(rng.integers(2))
-        f = r._kernels[approaching]
-        d = rng.uniform(0.05, 1.2)
-        u = rng.uniform(0.0, 1.0) * (1.0 if approaching else -1.0)
-        al, al1 = rng.uniform(-0.2, 0.2), rng.uniform(-0.1, 0.1)
-        acc = al - f(d, u)
-        span = rng.uniform(1e-3, 0.5)
-
-        def minus_force(x):
-            dx, ux = r._dp_step(f, al, al1, d, u, acc, x, 1e-8, 1e-8)[:2]
-            return -f(dx, ux)
-        found, calls = r._refine_peak((0.0, f(d, u), d, u, acc, approaching, al, al1), span)
+    samples at the span's ends, which the resolver takes with it) is short of the one a search
+    to 1e-12 of the span finds by about F'' dx^2 / 2, at most a part _PEAK_XATOL^2 of the
+    force's variation over the span: 1e-8 at 1e-4, a hundredth of the impact's own integration
+    error (a tolerance of 1e-3 fails this bound)."""
+    for r, sample, span, minus_force in searches_along_a_step(model, 5):
+        found, calls = r._refine_peak(sample, span)
         # the resolver takes the larger of the search and the samples at the ends (_sample):
         # a maximum at an end is the sample's, found to first order only by the search
-        ends = max(f(d, u), -minus_force(span))
+        ends = max(sample[1], -minus_force(span))
         found = max(found, ends)
         tight = max(-bounded_minimum(minus_force, span, 1e-12 * span)[0], ends)
         variation = tight - min(-minus_force(x) for x in np.linspace(1e-9 * span, span, 41))
