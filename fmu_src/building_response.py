@@ -66,7 +66,7 @@ from scipy.optimize import brentq
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
 from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
-                              canonical_length, first_root, hermite_range_scalar, max_abs)
+                              canonical_length, first_root, hermite_range, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -756,9 +756,59 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             s0 + s1 + curvatures) - bound5 * w4 > 0.0
         monotonic &= G[:, 2] * G[:, 3] > 0.0
         keep = flags & ~(reach <= limits) & ~monotonic
-        left = keep.any(axis=1).nonzero()[0].tolist()
+        rows, cols = keep.nonzero()                           # interval by interval, functions ascending
+        if rows.size:
+            # the tests _peaks runs on each candidate, on all of them at once: the same IEEE
+            # operations (hermite_range is hermite_range_scalar element by element), so the same
+            # decisions and the same deferred bounds.  A candidate with a slope of one sign whose
+            # slope's Hermite range keeps that sign (within its bound) has its extremes at the ends
+            # (the cheaper bound of that test failed for every candidate: `monotonic` above)
+            s0c, s1c = G[rows, 2, cols], G[rows, 3, cols]
+            err = bound5[rows, cols] * w4
+            slo, shi = hermite_range(s0c, s1c, length * G[rows, 4, cols], length * G[rows, 5, cols])
+            sign_kept = (s0c * s1c > 0.0) & ((slo - err > 0.0) | (shi + err < 0.0))
+            ends = G[rows, 1, cols]
+            accel = cols >= two_n
+            ends[accel] += accel_offset[cols[accel] - two_n]           # as _peaks' g1 (no 0.0 added elsewhere)
+            lo, hi = hermite_range(G[rows, 0, cols] + offset[cols], ends, length * s0c, length * s1c)
+            bound = np.maximum(-lo, hi) + bound4[rows, cols] * w4
+            deferred = ~sign_kept & ~(bound <= limits[rows, cols])
+            rows, cols, bound = rows[deferred].tolist(), cols[deferred].tolist(), bound[deferred].tolist()
+        else:
+            rows = cols = bound = []
+        # the deferred searches, interval by interval as _peaks would add them (the same list
+        # and, past MAX_PENDING, the same pruning at the same interval with the same peaks)
+        key = (state.mode != 0).tobytes()
+        pending = state.pending
+        k, total = 0, len(rows)
+        while k < total:
+            i = rows[k]
+            stop = k + 1
+            while stop < total and rows[stop] == i:
+                stop += 1
+            y_copy = Y[i].copy()
+            pending.extend((j, U, key, y_copy, length, xtol) for j, U in zip(cols[k:stop], bound[k:stop]))
+            cost.peaks_deferred += stop - k
+            k = stop
+            if len(pending) > MAX_PENDING:
+                new = running[i + 1]                          # _peaks' running peaks after interval i
+                atol = self._peak_atol
+                state.pending = pending = [e for e in pending if e[1] > new[e[0]] + atol[e[0]]]
+                if len(pending) > MAX_PENDING // 2:
+                    # the searches raise the running peaks: the intervals after this one go
+                    # through _peaks one by one, against those (as before)
+                    state.peaks = np.maximum(state.peaks, new)
+                    self.resolve_peaks(state, cost)
+                    self._peaks_one_by_one(cfg, state, Y, G, bound4, bound5, keep, running, i + 1, p, length,
+                                           xtol, cost)
+                    return
+        state.peaks = np.maximum(state.peaks, running[-1])
+
+    def _peaks_one_by_one(self, cfg, state, Y, G, bound4, bound5, keep, running, first, p, length, xtol, cost):
+        """:meth:`_peaks` of the intervals from ``first`` on (of :meth:`_interval_peaks`), one by one."""
         B = np.stack([bound4, bound5], axis=2)               # (count, m, 2) as Scan.B
-        for i in left:
+        for i in keep[first:].any(axis=1).nonzero()[0].tolist():
+            i += first
             state.peaks = np.maximum(state.peaks, running[i])  # the end values before it
             scan = object.__new__(Scan)
             scan.G = G[i].T

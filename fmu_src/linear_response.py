@@ -131,7 +131,10 @@ def hermite_range(g0, g1, d0, d1):
     """Min and max over [0, 1] of the cubic Hermite ``H`` with ``H(0)=g0, H(1)=g1, H'(0)=d0, H'(1)=d1``.
 
     Vectorised over arrays of equal shape (``d`` are slopes per unit of the normalised time,
-    i.e. ``L g'``).
+    i.e. ``L g'``).  The same IEEE operations as :func:`hermite_range_scalar`, element by
+    element (the same branches: a cubic term below ``1e-14`` of the others takes the linear
+    root, whatever the discriminant), so the same floats: the in-step peak tests of many
+    intervals at once (``ExactPiecewiseLinear._interval_peaks``) decide as one by one.
     """
     a = 3.0 * (g1 - g0) - 2.0 * d0 - d1          # H = g0 + d0 t + a t^2 + b t^3
     b = 2.0 * (g0 - g1) + d0 + d1
@@ -144,8 +147,9 @@ def hermite_range(g0, g1, d0, d1):
     quad = np.abs(qa) > 1e-14 * (np.abs(qb) + np.abs(d0)) + 1e-300
     den = np.where(quad, 2.0 * qa, 1.0)
     lin = np.where(qb != 0.0, -d0 / np.where(qb != 0.0, qb, 1.0), -1.0)
+    real = ~quad | (disc >= 0.0)                 # the linear root needs no discriminant
     for r in (np.where(quad, (-qb - sq) / den, lin), np.where(quad, (-qb + sq) / den, lin)):
-        ok = (disc >= 0.0) & (r > 0.0) & (r < 1.0)
+        ok = real & (r > 0.0) & (r < 1.0)
         rr = np.where(ok, r, 0.0)
         h = g0 + rr * (d0 + rr * (a + rr * b))
         lo = np.where(ok, np.minimum(lo, h), lo)
