@@ -119,15 +119,19 @@ def phi_functions(x, second: bool = True):
         r = float(mag[small].max())
         terms = next((k for k in range(2, _SERIES_TERMS + 1) if r ** (k + 1) / _FACTORIALS[k + 1] < 1e-17),
                      _SERIES_TERMS)
+        # adding complex scalars: the values of adding the float c (as c + 0j), with less
+        # conversion per term (in place, out=p2, would not do: numpy's complex product then
+        # takes another loop, which rounds some products differently)
         p2 = np.full_like(xs, _INV_FACTORIALS[terms + 2])
         for k in range(terms - 1, -1, -1):
-            p2 = p2 * xs + _INV_FACTORIALS[k + 2]
+            p2 = p2 * xs + _INV_FACTORIALS_COMPLEX[k + 2]
         phi2[small] = p2
     return e, phi1, phi2
 
 
 _FACTORIALS = [float(math.factorial(k)) for k in range(_SERIES_TERMS + 3)]
 _INV_FACTORIALS = [1.0 / f for f in _FACTORIALS]
+_INV_FACTORIALS_COMPLEX = tuple(np.complex128(c) for c in _INV_FACTORIALS)
 
 
 def hermite_range(g0, g1, d0, d1):
