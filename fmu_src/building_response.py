@@ -592,22 +592,24 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
                    and (longest == positive[0] or cfg.segment_map(longest) is first))
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
-        Y = np.empty((count, size))
-        Y[:, two_n] = ag0
-        Y[:, two_n + 1] = slope
-        Y[:, two_n + 2:] = p
         if uniform:
-            # z_1 .. z_count in one product, x = [z0; p; ag_0 .. ag_count-1; slope_0 .. slope_count-1]
+            # z_1 .. z_count in one product, x = [z0; p; ag_0 .. ag_count-1; slope_0 .. slope_count-1];
+            # Y's rows [z_j; ag_j; slope_j; p] gathered from [x; z_1 .. z_count] by one index
+            # (the same numbers as assigning its blocks, in a third of the numpy calls)
             x = np.concatenate((state.u, state.v, p, ag0, slope))
             chain = self._batch_plan(first)[4].get(count)
             if chain is None:
                 chain = self._chain(first, count)
-            Z = (chain @ x).reshape(count, two_n)
-            Y[0, :two_n] = x[:two_n]
-            Y[1:, :two_n] = Z[:-1]
-            z = Z[-1]
+            chain, gather = chain
+            known = np.concatenate((x, chain @ x))
+            Y = known[gather]
+            z = known[-two_n:]
             groups = {id(first): range(count)}
         else:
+            Y = np.empty((count, size))
+            Y[:, two_n] = ag0
+            Y[:, two_n + 1] = slope
+            Y[:, two_n + 2:] = p
             Y[0, :n] = state.u
             Y[0, n:two_n] = state.v
             groups = {}                              # intervals by map (lengths equal to round-off share one)
@@ -844,8 +846,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """The block matrix giving the states ``z_1 .. z_count`` (rows of ``2n``) after ``count``
         intervals of ``smap``'s length from ``x = [z0; p; ag_0 .. ag_count-1; slope_0 ..
         slope_count-1]``: ``z_j = S^j z0 + sum_{i<j} S^i S_p p + sum_{i<j} S^(j-1-i) S_a [ag_i;
-        slope_i]`` with ``smap.state = [S, S_a, S_p]``.  Kept in the map's plan, at most
-        ``MAX_CHAINS`` counts per map (a step of 32 intervals of a 20-storey building: 1.3 MB)."""
+        slope_i]`` with ``smap.state = [S, S_a, S_p]``, with the index that gathers the intervals'
+        ``y`` rows from ``[x; z_1 .. z_count]``: ``(chain, gather)``.  Kept in the map's plan, at
+        most ``MAX_CHAINS`` counts per map (a step of 32 intervals of a 20-storey building: 1.3 MB)."""
         n = self.n
         two_n = 2 * n
         state = smap.state
@@ -864,11 +867,20 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             for i in range(j):
                 block[:, 3 * n + i] = ramps[j - 1 - i][:, 0]
                 block[:, 3 * n + count + i] = ramps[j - 1 - i][:, 1]
+        # Y's rows (_advance_batch) from [x; z_1 .. z_count]: z_j at 3n + 2 count + 2n (j - 1) (x's z0
+        # for j = 0), then ag_j, slope_j and p from x
+        width = 3 * n + 2 * count
+        gather = np.empty((count, 3 * n + 2), dtype=np.intp)
+        gather[0, :two_n] = np.arange(two_n)
+        gather[1:, :two_n] = width + np.arange((count - 1) * two_n).reshape(count - 1, two_n)
+        gather[:, two_n] = 3 * n + np.arange(count)
+        gather[:, two_n + 1] = 3 * n + count + np.arange(count)
+        gather[:, two_n + 2:] = two_n + np.arange(n)
         chains = self._batch_plan(smap)[4]
         if len(chains) >= MAX_CHAINS:
             chains.pop(next(iter(chains)))
-        chains[count] = chain
-        return chain
+        chains[count] = (chain, gather)
+        return chains[count]
 
     def fits_unmapped(self, h: float) -> bool:
         """True if :meth:`advance_unmapped` can take a step of ``h`` s (its quadrature stays within
