@@ -1371,13 +1371,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
         # (only the candidates' rows: most segments leave a few of the 3n functions)
-        rows = G[candidates].tolist()
-        bounds = B[candidates].tolist()
-        ends = g1[candidates].tolist()
+        # (one gather of the candidates' numbers: G's six columns, B's two, g(L) with its
+        # offset, the limit)
+        table = np.column_stack((G, B, g1, limits))[candidates].tolist()
         offsets = accel_offset.tolist()
-        limits = limits[candidates].tolist()
         deferred = []
-        for j, (g0, _, s0, s1, c0, c1), bound, end, limit in zip(candidates, rows, bounds, ends, limits):
+        for j, (g0, _, s0, s1, c0, c1, bound0, bound1, end, limit) in zip(candidates, table):
             if j >= 2 * n:
                 g0 = g0 + offsets[j - 2 * n]
             else:
@@ -1386,7 +1385,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # a slope that provably keeps its sign puts the extremes at the ends: first the
                 # bound of the slope's Hermite (as the prefilter's above, with its round-off
                 # margin: where it decides, the exact test decides the same), then the test
-                err = bound[1] * w4
+                err = bound1 * w4
                 a0, a1 = abs(s0), abs(s1)
                 e = length * (abs(c0) + abs(c1))
                 if min(a0, a1) - _HERMITE_SLOPE_GAIN * e - _HERMITE_MARGIN * (a0 + a1 + e) - err > 0.0:
@@ -1395,7 +1394,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if lo - err > 0.0 or hi + err < 0.0:
                     continue
             lo, hi = hermite_range_scalar(g0, end, length * s0, length * s1)
-            reach = max(-lo, hi) + bound[0] * w4
+            reach = max(-lo, hi) + bound0 * w4
             if reach <= limit:
                 continue
             # a new peak is possible in this segment: keep it for a search when the peaks are
