@@ -740,8 +740,8 @@ class TaylorSegment(ModalSegment):
     at every point of a search.  The bounds of higher derivatives over ``[s, s + w]`` come from
     the start (:meth:`bound`): ``q'' = lam q' + beta1`` gives ``|q_j'(t)| <= (|q_j'(0)| + t
     |beta1_j|) e^{max(Re lam, 0) t}``, with no evaluation at ``s``.  A longer segment is
-    evaluated in modal form.  Used for yielding buildings; a linear building keeps
-    :class:`ModalSegment` (bit for bit the results of earlier versions).
+    evaluated in modal form.  Used by every deferred in-step peak search
+    (``ExactPiecewiseLinear.resolve_peaks``) and by a yielding building's event searches.
     """
 
     __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds")
