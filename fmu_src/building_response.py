@@ -856,17 +856,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         chain = np.zeros((count * two_n, 3 * n + 2 * count))
         power = np.eye(two_n)                    # S^j
         forced = np.zeros((two_n, n))            # sum_{i<j} S^i S_p
-        ramps = []                               # S^k S_a
+        ramps = np.empty((count, two_n, 2))      # S^k S_a
         for j in range(1, count + 1):
-            ramps.append(power @ Sa)
+            ramps[j - 1] = power @ Sa
             forced = forced + power @ Sp
             power = S @ power
             block = chain[(j - 1) * two_n:j * two_n]
             block[:, :two_n] = power
             block[:, two_n:3 * n] = forced
-            for i in range(j):
-                block[:, 3 * n + i] = ramps[j - 1 - i][:, 0]
-                block[:, 3 * n + count + i] = ramps[j - 1 - i][:, 1]
+            # interval i's ramp columns: S^(j-1-i) S_a, i = 0 .. j-1 (copies, one per column kind)
+            block[:, 3 * n:3 * n + j] = ramps[j - 1::-1, :, 0].T
+            block[:, 3 * n + count:3 * n + count + j] = ramps[j - 1::-1, :, 1].T
         # Y's rows (_advance_batch) from [x; z_1 .. z_count]: z_j at 3n + 2 count + 2n (j - 1) (x's z0
         # for j = 0), then ag_j, slope_j and p from x
         width = 3 * n + 2 * count
