@@ -370,6 +370,7 @@ class Configuration:
         self._maps: OrderedDict[float, SegmentMap] = OrderedDict()
         self._exact: dict[float, SegmentMap] = {}      # the same maps by the exact length asked
         self._watch_modal_abs = None                    # |watch_rows V| (change_bounds)
+        self._scan_start = None                         # scan_rows' length-independent rows
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
@@ -565,20 +566,25 @@ class Configuration:
 
     def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
         """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
-        n = self.n
-        size = 3 * n + 2
         A, F = self.A, self.peak_rows
-        Y0 = np.zeros((2 * n, size))
-        Y0[:, :2 * n] = np.eye(2 * n)
-        B0y = np.zeros((2 * n, size))
-        B0y[:, 2 * n:] = self.B0
-        B1y = np.zeros((2 * n, size))
-        B1y[:, 2 * n:] = self.B1
-        D0 = A @ Y0 + B0y
+        start = self._scan_start
+        if start is None:
+            # the rows of the segment's start, whatever its length: made once per configuration
+            # (the same products as below, so the same values)
+            n = self.n
+            size = 3 * n + 2
+            Y0 = np.zeros((2 * n, size))
+            Y0[:, :2 * n] = np.eye(2 * n)
+            B0y = np.zeros((2 * n, size))
+            B0y[:, 2 * n:] = self.B0
+            B1y = np.zeros((2 * n, size))
+            B1y[:, 2 * n:] = self.B1
+            D0 = A @ Y0 + B0y
+            WD0 = self.W @ D0
+            start = self._scan_start = (B0y, B1y, F @ Y0, F @ D0, F @ (A @ D0 + B1y), WD0.real, WD0.imag)
+        B0y, B1y, FY0, FD0, FD0dot, WD0_real, WD0_imag = start
         D1 = A @ state_map + B0y + B1y * length
-        WD0 = self.W @ D0
-        return np.vstack([F @ Y0, F @ state_map, F @ D0, F @ D1, F @ (A @ D0 + B1y), F @ (A @ D1 + B1y),
-                          WD0.real, WD0.imag])
+        return np.vstack([FY0, F @ state_map, FD0, F @ D1, FD0dot, F @ (A @ D1 + B1y), WD0_real, WD0_imag])
 
     def scan_vector(self, z0: np.ndarray, z1: np.ndarray, w: np.ndarray, length: float) -> np.ndarray:
         """A segment's :class:`Scan` vector from its end states (the ad hoc path)."""
