@@ -35,9 +35,10 @@ step where nothing happens costs a few vector operations:
 2. for the functions it does not clear, cubic Hermite interpolation through the end values and
    slopes with a bound of the fourth derivative (:class:`~fmu_src.linear_response.Scan`);
 3. for the few left, bisection and bracketed Newton on the exact solution
-   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`): in
-   modal form for a linear building, on each function's Taylor polynomial (Python floats,
-   :class:`~fmu_src.linear_response.TaylorSegment`) for a yielding one.
+   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`), on
+   each function's Taylor polynomial (Python floats,
+   :class:`~fmu_src.linear_response.TaylorSegment`; in modal form where a segment is too long
+   for it).
 
 A yielding building meets many stiffness configurations (yield patterns), most of them for a
 few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
