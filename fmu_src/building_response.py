@@ -35,9 +35,10 @@ step where nothing happens costs a few vector operations:
 2. for the functions it does not clear, cubic Hermite interpolation through the end values and
    slopes with a bound of the fourth derivative (:class:`~fmu_src.linear_response.Scan`);
 3. for the few left, bisection and bracketed Newton on the exact solution
-   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`): in
-   modal form for a linear building, on each function's Taylor polynomial (Python floats,
-   :class:`~fmu_src.linear_response.TaylorSegment`) for a yielding one.
+   (:func:`~fmu_src.linear_response.first_root`, :func:`~fmu_src.linear_response.max_abs`), on
+   each function's Taylor polynomial (Python floats,
+   :class:`~fmu_src.linear_response.TaylorSegment`; in modal form where a segment is too long
+   for it).
 
 A yielding building meets many stiffness configurations (yield patterns), most of them for a
 few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
@@ -66,7 +67,7 @@ from scipy.optimize import brentq
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
 from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
-                              canonical_length, first_root, hermite_range_scalar, max_abs)
+                              canonical_length, first_root, hermite_range, hermite_range_scalar, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -592,22 +593,24 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
                    and (longest == positive[0] or cfg.segment_map(longest) is first))
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
-        Y = np.empty((count, size))
-        Y[:, two_n] = ag0
-        Y[:, two_n + 1] = slope
-        Y[:, two_n + 2:] = p
         if uniform:
-            # z_1 .. z_count in one product, x = [z0; p; ag_0 .. ag_count-1; slope_0 .. slope_count-1]
+            # z_1 .. z_count in one product, x = [z0; p; ag_0 .. ag_count-1; slope_0 .. slope_count-1];
+            # Y's rows [z_j; ag_j; slope_j; p] gathered from [x; z_1 .. z_count] by one index
+            # (the same numbers as assigning its blocks, in a third of the numpy calls)
             x = np.concatenate((state.u, state.v, p, ag0, slope))
             chain = self._batch_plan(first)[4].get(count)
             if chain is None:
                 chain = self._chain(first, count)
-            Z = (chain @ x).reshape(count, two_n)
-            Y[0, :two_n] = x[:two_n]
-            Y[1:, :two_n] = Z[:-1]
-            z = Z[-1]
+            chain, gather = chain
+            known = np.concatenate((x, chain @ x))
+            Y = known[gather]
+            z = known[-two_n:]
             groups = {id(first): range(count)}
         else:
+            Y = np.empty((count, size))
+            Y[:, two_n] = ag0
+            Y[:, two_n + 1] = slope
+            Y[:, two_n + 2:] = p
             Y[0, :n] = state.u
             Y[0, n:two_n] = state.v
             groups = {}                              # intervals by map (lengths equal to round-off share one)
@@ -756,9 +759,59 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             s0 + s1 + curvatures) - bound5 * w4 > 0.0
         monotonic &= G[:, 2] * G[:, 3] > 0.0
         keep = flags & ~(reach <= limits) & ~monotonic
-        left = keep.any(axis=1).nonzero()[0].tolist()
+        rows, cols = keep.nonzero()                           # interval by interval, functions ascending
+        if rows.size:
+            # the tests _peaks runs on each candidate, on all of them at once: the same IEEE
+            # operations (hermite_range is hermite_range_scalar element by element), so the same
+            # decisions and the same deferred bounds.  A candidate with a slope of one sign whose
+            # slope's Hermite range keeps that sign (within its bound) has its extremes at the ends
+            # (the cheaper bound of that test failed for every candidate: `monotonic` above)
+            s0c, s1c = G[rows, 2, cols], G[rows, 3, cols]
+            err = bound5[rows, cols] * w4
+            slo, shi = hermite_range(s0c, s1c, length * G[rows, 4, cols], length * G[rows, 5, cols])
+            sign_kept = (s0c * s1c > 0.0) & ((slo - err > 0.0) | (shi + err < 0.0))
+            ends = G[rows, 1, cols]
+            accel = cols >= two_n
+            ends[accel] += accel_offset[cols[accel] - two_n]           # as _peaks' g1 (no 0.0 added elsewhere)
+            lo, hi = hermite_range(G[rows, 0, cols] + offset[cols], ends, length * s0c, length * s1c)
+            bound = np.maximum(-lo, hi) + bound4[rows, cols] * w4
+            deferred = ~sign_kept & ~(bound <= limits[rows, cols])
+            rows, cols, bound = rows[deferred].tolist(), cols[deferred].tolist(), bound[deferred].tolist()
+        else:
+            rows = cols = bound = []
+        # the deferred searches, interval by interval as _peaks would add them (the same list
+        # and, past MAX_PENDING, the same pruning at the same interval with the same peaks)
+        key = (state.mode != 0).tobytes()
+        pending = state.pending
+        k, total = 0, len(rows)
+        while k < total:
+            i = rows[k]
+            stop = k + 1
+            while stop < total and rows[stop] == i:
+                stop += 1
+            y_copy = Y[i].copy()
+            pending.extend((j, U, key, y_copy, length, xtol) for j, U in zip(cols[k:stop], bound[k:stop]))
+            cost.peaks_deferred += stop - k
+            k = stop
+            if len(pending) > MAX_PENDING:
+                new = running[i + 1]                          # _peaks' running peaks after interval i
+                atol = self._peak_atol
+                state.pending = pending = [e for e in pending if e[1] > new[e[0]] + atol[e[0]]]
+                if len(pending) > MAX_PENDING // 2:
+                    # the searches raise the running peaks: the intervals after this one go
+                    # through _peaks one by one, against those (as before)
+                    state.peaks = np.maximum(state.peaks, new)
+                    self.resolve_peaks(state, cost)
+                    self._peaks_one_by_one(cfg, state, Y, G, bound4, bound5, keep, running, i + 1, p, length,
+                                           xtol, cost)
+                    return
+        state.peaks = np.maximum(state.peaks, running[-1])
+
+    def _peaks_one_by_one(self, cfg, state, Y, G, bound4, bound5, keep, running, first, p, length, xtol, cost):
+        """:meth:`_peaks` of the intervals from ``first`` on (of :meth:`_interval_peaks`), one by one."""
         B = np.stack([bound4, bound5], axis=2)               # (count, m, 2) as Scan.B
-        for i in left:
+        for i in keep[first:].any(axis=1).nonzero()[0].tolist():
+            i += first
             state.peaks = np.maximum(state.peaks, running[i])  # the end values before it
             scan = object.__new__(Scan)
             scan.G = G[i].T
@@ -794,8 +847,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """The block matrix giving the states ``z_1 .. z_count`` (rows of ``2n``) after ``count``
         intervals of ``smap``'s length from ``x = [z0; p; ag_0 .. ag_count-1; slope_0 ..
         slope_count-1]``: ``z_j = S^j z0 + sum_{i<j} S^i S_p p + sum_{i<j} S^(j-1-i) S_a [ag_i;
-        slope_i]`` with ``smap.state = [S, S_a, S_p]``.  Kept in the map's plan, at most
-        ``MAX_CHAINS`` counts per map (a step of 32 intervals of a 20-storey building: 1.3 MB)."""
+        slope_i]`` with ``smap.state = [S, S_a, S_p]``, with the index that gathers the intervals'
+        ``y`` rows from ``[x; z_1 .. z_count]``: ``(chain, gather)``.  Kept in the map's plan, at
+        most ``MAX_CHAINS`` counts per map (a step of 32 intervals of a 20-storey building: 1.3 MB)."""
         n = self.n
         two_n = 2 * n
         state = smap.state
@@ -803,22 +857,31 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         chain = np.zeros((count * two_n, 3 * n + 2 * count))
         power = np.eye(two_n)                    # S^j
         forced = np.zeros((two_n, n))            # sum_{i<j} S^i S_p
-        ramps = []                               # S^k S_a
+        ramps = np.empty((count, two_n, 2))      # S^k S_a
         for j in range(1, count + 1):
-            ramps.append(power @ Sa)
+            ramps[j - 1] = power @ Sa
             forced = forced + power @ Sp
             power = S @ power
             block = chain[(j - 1) * two_n:j * two_n]
             block[:, :two_n] = power
             block[:, two_n:3 * n] = forced
-            for i in range(j):
-                block[:, 3 * n + i] = ramps[j - 1 - i][:, 0]
-                block[:, 3 * n + count + i] = ramps[j - 1 - i][:, 1]
+            # interval i's ramp columns: S^(j-1-i) S_a, i = 0 .. j-1 (copies, one per column kind)
+            block[:, 3 * n:3 * n + j] = ramps[j - 1::-1, :, 0].T
+            block[:, 3 * n + count:3 * n + count + j] = ramps[j - 1::-1, :, 1].T
+        # Y's rows (_advance_batch) from [x; z_1 .. z_count]: z_j at 3n + 2 count + 2n (j - 1) (x's z0
+        # for j = 0), then ag_j, slope_j and p from x
+        width = 3 * n + 2 * count
+        gather = np.empty((count, 3 * n + 2), dtype=np.intp)
+        gather[0, :two_n] = np.arange(two_n)
+        gather[1:, :two_n] = width + np.arange((count - 1) * two_n).reshape(count - 1, two_n)
+        gather[:, two_n] = 3 * n + np.arange(count)
+        gather[:, two_n + 1] = 3 * n + count + np.arange(count)
+        gather[:, two_n + 2:] = two_n + np.arange(n)
         chains = self._batch_plan(smap)[4]
         if len(chains) >= MAX_CHAINS:
             chains.pop(next(iter(chains)))
-        chains[count] = chain
-        return chain
+        chains[count] = (chain, gather)
+        return chains[count]
 
     def fits_unmapped(self, h: float) -> bool:
         """True if :meth:`advance_unmapped` can take a step of ``h`` s (its quadrature stays within
@@ -1309,13 +1372,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
         # (only the candidates' rows: most segments leave a few of the 3n functions)
-        rows = G[candidates].tolist()
-        bounds = B[candidates].tolist()
-        ends = g1[candidates].tolist()
+        # (one gather of the candidates' numbers: G's six columns, B's two, g(L) with its
+        # offset, the limit)
+        table = np.column_stack((G, B, g1, limits))[candidates].tolist()
         offsets = accel_offset.tolist()
-        limits = limits[candidates].tolist()
         deferred = []
-        for j, (g0, _, s0, s1, c0, c1), bound, end, limit in zip(candidates, rows, bounds, ends, limits):
+        for j, (g0, _, s0, s1, c0, c1, bound0, bound1, end, limit) in zip(candidates, table):
             if j >= 2 * n:
                 g0 = g0 + offsets[j - 2 * n]
             else:
@@ -1324,7 +1386,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # a slope that provably keeps its sign puts the extremes at the ends: first the
                 # bound of the slope's Hermite (as the prefilter's above, with its round-off
                 # margin: where it decides, the exact test decides the same), then the test
-                err = bound[1] * w4
+                err = bound1 * w4
                 a0, a1 = abs(s0), abs(s1)
                 e = length * (abs(c0) + abs(c1))
                 if min(a0, a1) - _HERMITE_SLOPE_GAIN * e - _HERMITE_MARGIN * (a0 + a1 + e) - err > 0.0:
@@ -1333,7 +1395,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if lo - err > 0.0 or hi + err < 0.0:
                     continue
             lo, hi = hermite_range_scalar(g0, end, length * s0, length * s1)
-            reach = max(-lo, hi) + bound[0] * w4
+            reach = max(-lo, hi) + bound0 * w4
             if reach <= limit:
                 continue
             # a new peak is possible in this segment: keep it for a search when the peaks are
@@ -1374,10 +1436,12 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             cfg = self._configuration_of(key)
             segment = segments.get(id(y))
             if segment is None:
-                # a yielding building's searches run on Taylor polynomials; a linear building
-                # keeps the modal evaluation of earlier versions (bit for bit)
-                segment = segments[id(y)] = (TaylorSegment(cfg, y[:2 * n], y[2 * n:], length) if inelastic
-                                             else ModalSegment(cfg, y[:2 * n], y[2 * n:]))
+                # the searches run on Taylor polynomials (Python floats, no exponential per point;
+                # the modal form for a segment too long for them, TaylorSegment.taylor): the
+                # same sums in another order, so a peak moves by round-off from the modal
+                # evaluation's (kasai_maison: 4e-16 relative at most) at a third of the cost
+                # (its final read of the peaks: 64 searches, 14 -> 5 ms)
+                segment = segments[id(y)] = TaylorSegment(cfg, y[:2 * n], y[2 * n:], length)
             offset = y[2 * n + 2 + j - 2 * n] * self._inv_m[j - 2 * n] if j >= 2 * n else 0.0
             cost.peak_searches += 1
             new[j], _ = max_abs(segment, cfg.peak_modal[j], offset, length, new[j], PEAK_XTOL * length,
@@ -1401,8 +1465,14 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cfg = self.configuration(np.zeros(self.n, dtype=np.int64))
         n = self.n
         drop = 2 * n + 1     # the ag1 column: a zero-order hold has no ramp (any value there is dropped)
-        state_map = np.insert(step_matrix, drop, 0.0, axis=1)
-        scan = np.delete(cfg.scan_rows(state_map, h), drop, axis=1)
+        # np.insert / np.delete of that column, as plain copies (a fifth of the cost of a new length)
+        state_map = np.zeros((step_matrix.shape[0], step_matrix.shape[1] + 1))
+        state_map[:, :drop] = step_matrix[:, :drop]
+        state_map[:, drop + 1:] = step_matrix[:, drop:]
+        full = cfg.scan_rows(state_map, h)
+        scan = np.empty((full.shape[0], full.shape[1] - 1))
+        scan[:, :drop] = full[:, :drop]
+        scan[:, drop:] = full[:, drop + 1:]
         change, _ = cfg.change_bounds(h)
         watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
         watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)

@@ -95,10 +95,12 @@ def phi_functions(x, second: bool = True):
     ``second=False`` phi2 is not computed (None): a segment without a ramp of the ground
     acceleration multiplies it by zero.
     """
+    # (count_nonzero instead of any(), and no np.where where no element needs it: the same
+    # values at a third less per call; the peak searches evaluate the solution hundreds of times)
     x = np.asarray(x, dtype=complex)
     e = np.exp(x)
-    zero = x == 0.0
-    if zero.any():
+    if np.count_nonzero(x) < x.size:
+        zero = x == 0.0
         phi1 = np.expm1(x) / np.where(zero, 1.0, x)
         phi1[zero] = 1.0
     else:
@@ -107,31 +109,39 @@ def phi_functions(x, second: bool = True):
         return e, phi1, None
     mag = np.abs(x)
     small = mag < _SERIES_RADIUS
-    safe = np.where(small, 1.0, x)
+    any_small = np.count_nonzero(small)
+    safe = np.where(small, 1.0, x) if any_small else x
     phi2 = (e - 1.0 - x) / (safe * safe)
-    if small.any():
+    if any_small:
         xs = x[small]
         # Horner for sum x^k/(k+2)!, as many terms as the largest |x| needs for a truncation
         # error below 1e-17 (at most _SERIES_TERMS for |x| < 0.25)
         r = float(mag[small].max())
         terms = next((k for k in range(2, _SERIES_TERMS + 1) if r ** (k + 1) / _FACTORIALS[k + 1] < 1e-17),
                      _SERIES_TERMS)
+        # adding complex scalars: the values of adding the float c (as c + 0j), with less
+        # conversion per term (in place, out=p2, would not do: numpy's complex product then
+        # takes another loop, which rounds some products differently)
         p2 = np.full_like(xs, _INV_FACTORIALS[terms + 2])
         for k in range(terms - 1, -1, -1):
-            p2 = p2 * xs + _INV_FACTORIALS[k + 2]
+            p2 = p2 * xs + _INV_FACTORIALS_COMPLEX[k + 2]
         phi2[small] = p2
     return e, phi1, phi2
 
 
 _FACTORIALS = [float(math.factorial(k)) for k in range(_SERIES_TERMS + 3)]
 _INV_FACTORIALS = [1.0 / f for f in _FACTORIALS]
+_INV_FACTORIALS_COMPLEX = tuple(np.complex128(c) for c in _INV_FACTORIALS)
 
 
 def hermite_range(g0, g1, d0, d1):
     """Min and max over [0, 1] of the cubic Hermite ``H`` with ``H(0)=g0, H(1)=g1, H'(0)=d0, H'(1)=d1``.
 
     Vectorised over arrays of equal shape (``d`` are slopes per unit of the normalised time,
-    i.e. ``L g'``).
+    i.e. ``L g'``).  The same IEEE operations as :func:`hermite_range_scalar`, element by
+    element (the same branches: a cubic term below ``1e-14`` of the others takes the linear
+    root, whatever the discriminant), so the same floats: the in-step peak tests of many
+    intervals at once (``ExactPiecewiseLinear._interval_peaks``) decide as one by one.
     """
     a = 3.0 * (g1 - g0) - 2.0 * d0 - d1          # H = g0 + d0 t + a t^2 + b t^3
     b = 2.0 * (g0 - g1) + d0 + d1
@@ -144,8 +154,9 @@ def hermite_range(g0, g1, d0, d1):
     quad = np.abs(qa) > 1e-14 * (np.abs(qb) + np.abs(d0)) + 1e-300
     den = np.where(quad, 2.0 * qa, 1.0)
     lin = np.where(qb != 0.0, -d0 / np.where(qb != 0.0, qb, 1.0), -1.0)
+    real = ~quad | (disc >= 0.0)                 # the linear root needs no discriminant
     for r in (np.where(quad, (-qb - sq) / den, lin), np.where(quad, (-qb + sq) / den, lin)):
-        ok = (disc >= 0.0) & (r > 0.0) & (r < 1.0)
+        ok = real & (r > 0.0) & (r < 1.0)
         rr = np.where(ok, r, 0.0)
         h = g0 + rr * (d0 + rr * (a + rr * b))
         lo = np.where(ok, np.minimum(lo, h), lo)
@@ -358,6 +369,8 @@ class Configuration:
         self.peak_modal_abs = np.abs(self.peak_modal)
         self._maps: OrderedDict[float, SegmentMap] = OrderedDict()
         self._exact: dict[float, SegmentMap] = {}      # the same maps by the exact length asked
+        self._watch_modal_abs = None                    # |watch_rows V| (change_bounds)
+        self._scan_start = None                         # scan_rows' length-independent rows
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
@@ -383,7 +396,7 @@ class Configuration:
         """``q(s)`` (complex, shape ``(2n,) + shape(s)``) for segment time(s) s."""
         s = np.asarray(s, dtype=float)
         x = np.multiply.outer(self.lam, s)
-        ramp = bool(beta1.any())
+        ramp = np.count_nonzero(beta1) > 0
         e, p1, p2 = phi_functions(x, second=ramp)
         if s.ndim == 0:
             q = e * q0 + s * p1 * beta0
@@ -510,7 +523,9 @@ class Configuration:
         work: a segment whose bound leaves every function inside its limits cannot have an
         event or a new peak.
         """
-        FV = np.abs(self.watch_rows @ self.V)                                   # (4n, 2n)
+        FV = self._watch_modal_abs
+        if FV is None:       # whatever the length: made once per configuration
+            FV = self._watch_modal_abs = np.abs(self.watch_rows @ self.V)       # (4n, 2n)
         with np.errstate(divide="ignore"):
             reach = np.minimum(length, np.where(self.lam_abs > 0.0, 2.0 / self.lam_abs, np.inf))
         growth = math.exp(self.growth_rate * length)
@@ -551,20 +566,25 @@ class Configuration:
 
     def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
         """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
-        n = self.n
-        size = 3 * n + 2
         A, F = self.A, self.peak_rows
-        Y0 = np.zeros((2 * n, size))
-        Y0[:, :2 * n] = np.eye(2 * n)
-        B0y = np.zeros((2 * n, size))
-        B0y[:, 2 * n:] = self.B0
-        B1y = np.zeros((2 * n, size))
-        B1y[:, 2 * n:] = self.B1
-        D0 = A @ Y0 + B0y
+        start = self._scan_start
+        if start is None:
+            # the rows of the segment's start, whatever its length: made once per configuration
+            # (the same products as below, so the same values)
+            n = self.n
+            size = 3 * n + 2
+            Y0 = np.zeros((2 * n, size))
+            Y0[:, :2 * n] = np.eye(2 * n)
+            B0y = np.zeros((2 * n, size))
+            B0y[:, 2 * n:] = self.B0
+            B1y = np.zeros((2 * n, size))
+            B1y[:, 2 * n:] = self.B1
+            D0 = A @ Y0 + B0y
+            WD0 = self.W @ D0
+            start = self._scan_start = (B0y, B1y, F @ Y0, F @ D0, F @ (A @ D0 + B1y), WD0.real, WD0.imag)
+        B0y, B1y, FY0, FD0, FD0dot, WD0_real, WD0_imag = start
         D1 = A @ state_map + B0y + B1y * length
-        WD0 = self.W @ D0
-        return np.vstack([F @ Y0, F @ state_map, F @ D0, F @ D1, F @ (A @ D0 + B1y), F @ (A @ D1 + B1y),
-                          WD0.real, WD0.imag])
+        return np.vstack([FY0, F @ state_map, FD0, F @ D1, FD0dot, F @ (A @ D1 + B1y), WD0_real, WD0_imag])
 
     def scan_vector(self, z0: np.ndarray, z1: np.ndarray, w: np.ndarray, length: float) -> np.ndarray:
         """A segment's :class:`Scan` vector from its end states (the ad hoc path)."""
@@ -726,8 +746,8 @@ class TaylorSegment(ModalSegment):
     at every point of a search.  The bounds of higher derivatives over ``[s, s + w]`` come from
     the start (:meth:`bound`): ``q'' = lam q' + beta1`` gives ``|q_j'(t)| <= (|q_j'(0)| + t
     |beta1_j|) e^{max(Re lam, 0) t}``, with no evaluation at ``s``.  A longer segment is
-    evaluated in modal form.  Used for yielding buildings; a linear building keeps
-    :class:`ModalSegment` (bit for bit the results of earlier versions).
+    evaluated in modal form.  Used by every deferred in-step peak search
+    (``ExactPiecewiseLinear.resolve_peaks``) and by a yielding building's event searches.
     """
 
     __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds")

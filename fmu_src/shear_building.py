@@ -404,6 +404,29 @@ def _oscillator_functions(omega: np.ndarray, sigma: np.ndarray, t: np.ndarray):
     return x_q, es, -w2 * es, v_v
 
 
+def _modal_zoh_parts(building: ShearBuilding):
+    """What :class:`ModalZohPropagator` needs of a building whatever the step length, made once
+    per building (a run meets a dozen lengths): ``(sigma, rate, T)``, the modal decay rates
+    (1/s), a rate at least every root's modulus (1/s), and ``T[j]`` the rows giving mode j's
+    ``(q0, q0', P)`` from ``y = [u0; v0; ag; f]``."""
+    n = building.n
+    m = building.masses
+    omega, phi = building.omegas, building.mode_shapes
+    sigma = 0.5 * np.einsum("ij,ik,kj->j", phi, building.C, phi)        # diag(Phi' C Phi) / 2
+    rate = float(np.max(np.maximum(omega, 2.0 * sigma))) if n else 0.0  # >= every |root|
+    # modal coordinates of y = [u0; v0; ag; f]: T[j] = rows (q0_j, q0'_j, P_j)
+    mphi = phi * m[:, None]                                   # M Phi
+    size = 3 * n + 1
+    T = np.zeros((n, 3, size))
+    T[:, 0, :n] = mphi.T
+    T[:, 1, n:2 * n] = mphi.T
+    T[:, 2, 2 * n] = -(mphi.sum(axis=0))                      # Phi' (-M 1)
+    T[:, 2, 2 * n + 1:] = phi.T
+    for arr in (sigma, T):
+        arr.setflags(write=False)
+    return sigma, rate, T
+
+
 class ModalZohPropagator:
     """:class:`ZohPropagator`'s matrices (``step_matrix``, ``damping_form``, ``transition``,
     ``input_matrix``; the same meaning) from the building's classical modes, without a matrix
@@ -426,10 +449,8 @@ class ModalZohPropagator:
         self.building = building
         self.h = h
         n = building.n
-        m = building.masses
         omega, phi = building.omegas, building.mode_shapes
-        sigma = 0.5 * np.einsum("ij,ik,kj->j", phi, building.C, phi)        # diag(Phi' C Phi) / 2
-        rate = float(np.max(np.maximum(omega, 2.0 * sigma))) if n else 0.0  # >= every |root|
+        sigma, rate, T = building._cached("modal_zoh", lambda: _modal_zoh_parts(building))
         chunks = max(1, int(math.ceil(rate * h / _ZOH_CHUNK_RATE)))
         if chunks > MAX_ZOH_CHUNKS:
             raise ValueError(f"a step of {h!r} s spans {chunks} quadrature chunks of the fastest mode; "
@@ -441,14 +462,7 @@ class ModalZohPropagator:
         times = np.concatenate(([h], nodes))[None, :]
         x_q, x_v, v_q, v_v = _oscillator_functions(omega[:, None], sigma[:, None], times)
         g = x_v[:, 1:] @ weights                                  # int_0^h g'(t) dt
-        # modal coordinates of y = [u0; v0; ag; f]: T[j] = rows (q0_j, q0'_j, P_j)
-        mphi = phi * m[:, None]                                   # M Phi
         size = 3 * n + 1
-        T = np.zeros((n, 3, size))
-        T[:, 0, :n] = mphi.T
-        T[:, 1, n:2 * n] = mphi.T
-        T[:, 2, 2 * n] = -(mphi.sum(axis=0))                      # Phi' (-M 1)
-        T[:, 2, 2 * n + 1:] = phi.T
         # q(h) = x_q q0 + x_v q0' + g P; q'(h) = v_q q0 + v_v q0' + g'(h) P
         end_q = np.stack([x_q[:, 0], x_v[:, 0], g], axis=1)       # (n, 3)
         end_v = np.stack([v_q[:, 0], v_v[:, 0], x_v[:, 0]], axis=1)

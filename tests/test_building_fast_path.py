@@ -170,10 +170,22 @@ def test_a_restored_state_takes_the_same_paths():
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
-def test_the_knot_step_peak_tests_together_decide_as_one_per_interval(monkeypatch):
+@pytest.mark.parametrize("max_pending", [building_response.MAX_PENDING, 8])
+def test_the_knot_step_peak_tests_together_decide_as_one_per_interval(monkeypatch, max_pending):
     """A 15-storey building through 40 s of El Centro in 0.16 s knot steps: the running peaks,
     the deferred searches and the peaks after them, with the intervals tested together and one
-    by one (Scan and _peaks per interval, as before), bit for bit."""
+    by one (Scan and _peaks per interval, as before), bit for bit.  With at most 8 deferred
+    searches kept, the list is pruned and searched inside a step's intervals (the intervals
+    after that one go through _peaks against the raised peaks): the same, and it happens."""
+    pruned = max_pending < building_response.MAX_PENDING
+    monkeypatch.setattr(building_response, "MAX_PENDING", max_pending)
+    fallbacks = []
+    original = building_response.ExactPiecewiseLinear._peaks_one_by_one
+
+    def counted(self, *args):
+        fallbacks.append(1)
+        return original(self, *args)
+    monkeypatch.setattr(building_response.ExactPiecewiseLinear, "_peaks_one_by_one", counted)
     rec = el_centro(0.3)
 
     def one_by_one(self, cfg, state, Y, scans, flags, p, length, xtol, cost):
@@ -204,6 +216,7 @@ def test_the_knot_step_peak_tests_together_decide_as_one_per_interval(monkeypatc
         np.testing.assert_array_equal(a, b_)
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     assert math.isfinite(float(runs[0][3].sum()))
+    assert bool(fallbacks) == pruned
 
 
 def test_reading_the_storey_shears_leaves_the_deferred_peak_searches_deferred():
