@@ -1,0 +1,399 @@
+"""Adversarial, randomised soundness of the master's gap proofs (cosim/master/gap_bound.py).
+
+A proof that says "open over ``[t, t + s]``" while the buildings' true motion closes the gap makes
+the package miss an impact.  Checked here against an oracle written apart from the proof:
+
+* :func:`exact_motion`, a linear building's exact motion under a piecewise-linear ground and a held
+  floor force, by superposition of closed-form mode responses (its own modes by
+  ``scipy.linalg.eigh(K, M)``, each mode's characteristic roots in complex arithmetic, the
+  record as a sum of ramps); checked once against solve_ivp at tight tolerance and against
+  building.fmu's own integrator (:class:`fmu_src.building_response.ExactPiecewiseLinear`);
+* between the dense points (which include every knot and every grid point, so the motion is
+  smooth between them) the relative displacement's maximum is that of the cubic Hermite
+  interpolant through the points' values and rates (:func:`hermite_max`; its error ``ds^4 / 384
+  max |x''''|`` is ~1e-15 m at 0.5 ms).
+
+Cases (seeded): random pairs of 1- to 6-storey buildings (Rayleigh or modal damping, periods 0.1 to
+2.5 s, damping 0 to 20 %), free masses, one to three levels per pair; states with fast closing
+velocities (up to ~2 m/s); records with knots denser than the grid (0.002-0.005 s, Kobe-like),
+sparser (0.05-0.2 s), irregular, with spikes between grid points and jumps; proof starts between
+knots; horizons of the master (dyadic nominal steps plus the 1e-9 base-step slack, the quiet and
+two-step reaches) and arbitrary clipped ones, below and above EXACT_MIN_HORIZON; held forces of
+either sign.  For every level the smallest gap the proof accepts over the whole horizon, and over
+a random part of it, is found by bisection (the proof is monotone in the gap), and the true motion
+must stay below it: the case where the proof barely passes.  The margins (accepted gap less the
+true reach) are the proofs' tightness (:func:`test_tightness_report` prints them).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from cosim.master import gap_bound
+from cosim.master.gap_bound import GRID, GroundAhead, ModalBound, OpenGaps
+from fmu_src.shear_building import ShearBuilding
+
+
+# -- the oracle ----------------------------------------------------------------------------------------
+def _modes(building: ShearBuilding):
+    """``(phi, w, c)``: mass-normalised mode shapes, circular frequencies (rad/s) and modal damping
+    ``phi_j' C phi_j`` (1/s), from scipy's generalised eigensolver (not the building's own modes)."""
+    M = np.diag(building.masses)
+    w2, phi = scipy.linalg.eigh(building.K, M)
+    c_modal = phi.T @ building.C @ phi
+    off = c_modal - np.diag(np.diag(c_modal))
+    assert np.abs(off).max(initial=0.0) <= 1e-9 * max(np.abs(c_modal).max(), 1e-300), "not classical"
+    return phi, np.sqrt(np.maximum(w2, 0.0)), np.diag(c_modal).copy()
+
+
+def _mode_functions(w: float, c: float, t: np.ndarray):
+    """Unit free responses ``(cq, h)`` (from ``q = 1`` and from ``q' = 1``), the step response ``S``
+    and the ramp response ``R`` of ``q'' + c q' + w^2 q = p`` at ``t >= 0``, and their rates
+    (``cq'``, ``h' ``; ``S' = h``, ``R' = S``)."""
+    if w == 0.0:
+        assert c == 0.0                   # the package's free mass is undamped
+        return np.ones_like(t), t.copy(), 0.5 * t * t, t ** 3 / 6.0, np.zeros_like(t), np.ones_like(t)
+    disc = np.sqrt(complex(c * c / 4.0 - w * w))
+    l1, l2 = -c / 2.0 + disc, -c / 2.0 - disc
+    assert abs(l1 - l2) > 0.05 * w, "near-critical damping: the oracle would cancel"
+    e1, e2 = np.exp(l1 * t), np.exp(l2 * t)
+    m1, m2 = np.expm1(l1 * t), np.expm1(l2 * t)
+    d = l1 - l2
+    h = (e1 - e2) / d
+    cq = (l1 * e2 - l2 * e1) / d
+    S = (m1 / l1 - m2 / l2) / d
+    R = ((m1 / l1 - t) / l1 - (m2 / l2 - t) / l2) / d
+    dcq = -w * w * h
+    dh = (l1 * e1 - l2 * e2) / d
+    return cq.real, h.real, S.real, R.real, dcq.real, dh.real
+
+
+def exact_motion(building: ShearBuilding, u0, v0, times, values, force, points):
+    """Floor displacements and velocities (m, m/s; points x floors) at ``points`` (s, >= 0) of the
+    linear building from ``u0, v0`` under the ground acceleration linear between the knots
+    ``(times, values)`` (times from the start, covering ``[0, points.max()]``; no jump inside)
+    and the floor force ``force`` (N) held: ``M u'' + C u' + K u = -M 1 ag + F``."""
+    phi, w, c = _modes(building)
+    M = building.masses
+    q0, qd0 = phi.T @ (M * u0), phi.T @ (M * v0)
+    gamma = phi.T @ M
+    load = phi.T @ force
+    end = float(points.max())
+    a0 = float(np.interp(0.0, times, values))
+    # ag(t) = a0 + sl0 t + sum_k dsl_k (t - tau_k)_+ over the knots tau_k inside (0, end)
+    slopes = np.diff(values) / np.diff(times)
+    j0 = int(np.searchsorted(times, 0.0, "right")) - 1
+    inside = np.flatnonzero((times > 0.0) & (times < end))
+    taus = times[inside]
+    dsl = slopes[inside] - slopes[inside - 1]
+    sl0 = slopes[j0]
+    n = building.n
+    q = np.empty((points.size, n))
+    qd = np.empty((points.size, n))
+    for j in range(n):
+        cq, h, S, R, dcq, dh = _mode_functions(float(w[j]), float(c[j]), points)
+        qj = q0[j] * cq + qd0[j] * h + (load[j] - gamma[j] * a0) * S - gamma[j] * sl0 * R
+        vj = q0[j] * dcq + qd0[j] * dh + (load[j] - gamma[j] * a0) * h - gamma[j] * sl0 * S
+        for tau, ds in zip(taus, dsl):
+            after = points > tau
+            if after.any():
+                _, _, S_k, R_k, _, _ = _mode_functions(float(w[j]), float(c[j]), points[after] - tau)
+                qj[after] -= gamma[j] * ds * R_k
+                vj[after] -= gamma[j] * ds * S_k
+        q[:, j], qd[:, j] = qj, vj
+    return q @ phi.T, qd @ phi.T
+
+
+def hermite_max(t: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The largest value on each interval ``[t_i, t_i+1]`` of the cubic Hermite interpolant of
+    values ``x`` and rates ``v`` (per interval)."""
+    dt = np.diff(t)
+    x0, x1, m0, m1 = x[:-1], x[1:], v[:-1] * dt, v[1:] * dt
+    # p(u) = a u^3 + b u^2 + m0 u + x0 on [0, 1]
+    a = 2.0 * x0 - 2.0 * x1 + m0 + m1
+    b = -3.0 * x0 + 3.0 * x1 - 2.0 * m0 - m1
+    best = np.maximum(x0, x1)
+    # p'(u) = 3 a u^2 + 2 b u + m0 = 0
+    A, B, C = 3.0 * a, 2.0 * b, m0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = B * B - 4.0 * A * C
+        root = np.sqrt(np.maximum(disc, 0.0))
+        candidates = [np.where(np.abs(A) > 1e-300, (-B + root) / (2.0 * A), -C / B),
+                      np.where(np.abs(A) > 1e-300, (-B - root) / (2.0 * A), -C / B)]
+    for u in candidates:
+        ok = (disc >= 0.0) & np.isfinite(u) & (u > 0.0) & (u < 1.0)
+        u = np.where(ok, u, 0.0)
+        val = ((a * u + b) * u + m0) * u + x0
+        best = np.where(ok, np.maximum(best, val), best)
+    return best
+
+
+# -- random cases ------------------------------------------------------------------------------------
+H_BASES = (0.005, 0.01, 0.02)
+
+
+def random_building(rng) -> ShearBuilding:
+    n = int(rng.integers(1, 7))
+    masses = rng.uniform(0.2, 3.0, n) * 1e5
+    stiff = rng.uniform(0.3, 3.0, n)
+    damping = "modal" if rng.random() < 0.5 else "rayleigh"
+    zeta = float(rng.choice([0.0, 0.02, 0.05, 0.1, 0.2]))
+    return ShearBuilding.from_period(float(rng.uniform(0.1, 2.5)), masses, stiff, zeta, damping)
+
+
+def random_horizon(rng) -> float:
+    """What the master asks for (adaptive.py): a dyadic nominal step plus the 1e-9 base-step slack,
+    the quiet horizon (8 base steps), two long steps ahead, or a clipped last step."""
+    h = float(rng.choice(H_BASES))
+    kind = rng.integers(4)
+    if kind == 0:
+        return h * 2.0 ** int(rng.integers(0, 6)) + 1e-9 * h
+    if kind == 1:
+        return 8 * h
+    if kind == 2:
+        return 2 * h * 2.0 ** int(rng.integers(0, 5)) + h
+    return float(rng.uniform(0.003, 0.7))
+
+
+def random_record(rng, t0: float, H: float):
+    """Knots (times, values; m/s^2) covering ``[t0 - 0.2, t0 + H + 0.2]``: accelerogram-like tones with
+    noise, sampled uniformly (dense, as Kobe's 0.005 s and denser, or sparse), irregularly, with
+    spikes between the grid points or a jump (two knots at one time) at a grid point."""
+    lo, hi = t0 - 0.2, t0 + H + 0.2
+    kind = rng.integers(5)
+    if kind == 0:       # dense
+        dt = float(rng.choice([0.002, 0.005]))
+    elif kind == 1:     # sparse
+        dt = float(rng.uniform(0.05, 0.2))
+    else:
+        dt = float(rng.choice([0.005, 0.01, 0.02]))
+    times = np.arange(lo - rng.uniform(0, dt), hi + dt, dt)
+    if kind == 2:       # irregular
+        times = np.sort(np.concatenate((times[:1], rng.uniform(times[0], times[-1], times.size), times[-1:])))
+        times = times[np.concatenate(([True], np.diff(times) > 1e-6))]
+    f = rng.uniform(0.3, 10.0, 4)
+    ph = rng.uniform(0.0, 2 * np.pi, 4)
+    amp = rng.uniform(0.5, 5.0)
+    values = amp * np.sin(2 * np.pi * f[:, None] * times + ph[:, None]).sum(0) / 2.0
+    values += rng.normal(0.0, 0.3 * amp, times.size)
+    if kind == 3:       # spikes midway between grid points (what the grid polyline does not see)
+        dS = H / GRID
+        k = rng.integers(0, GRID, int(rng.integers(1, 6)))
+        spikes = t0 + (k + rng.uniform(0.2, 0.8, k.size)) * dS
+        keep = np.abs(times[:, None] - spikes[None, :]).min(axis=1) > 1e-5
+        times = np.concatenate((times[keep], spikes))
+        values = np.concatenate((values[keep], rng.choice([-1.0, 1.0], spikes.size) * rng.uniform(10, 30, spikes.size)))
+        order = np.argsort(times)
+        times, values = times[order], values[order]
+    if kind == 4 and rng.random() < 0.5:   # a jump (record start or end) at an interior grid point
+        T = t0 + H * int(rng.integers(1, GRID)) / GRID
+        before = times < T
+        at = float(np.interp(T, times, values))
+        times = np.concatenate((times[before], [T, T], times[~before]))
+        values = np.concatenate((values[before], [at, 0.0], 0.0 * values[~before]))
+    return times, values
+
+
+def make_case(rng):
+    """A pair of buildings, levels, a state, a ground and held forces, as OpenGaps takes them."""
+    free = rng.random() < 0.08
+    if free:
+        bl = ShearBuilding([float(rng.uniform(100, 1e4))], [0.0], 0.0)
+        br = ShearBuilding([float(rng.uniform(100, 1e4))], [0.0], 0.0)
+    else:
+        bl, br = random_building(rng), random_building(rng)
+    nl, nr = bl.n, br.n
+    t0 = float(rng.uniform(0.0, 10.0))
+    H = random_horizon(rng)
+    times, values = random_record(rng, t0, H)
+    speed = float(rng.choice([0.05, 0.3, 1.0]))
+    ul, ur = rng.normal(0.0, 0.03, nl), rng.normal(0.0, 0.03, nr)
+    vl, vr = rng.normal(0.0, speed, nl), rng.normal(0.0, speed, nr)
+    if rng.random() < 0.5:                          # closing fast: left moves right, right moves left
+        vl, vr = np.abs(vl) + speed, -np.abs(vr) - speed
+    levels = sorted({(int(rng.integers(nl)), int(rng.integers(nr))) for _ in range(int(rng.integers(1, 4)))})
+    forces = None
+    if rng.random() < 0.5:                          # held forces: a contact's (-F left, +F right), or any
+        Fl, Fr = np.zeros(nl), np.zeros(nr)
+        scale = 1e3 if free else 3e5
+        if rng.random() < 0.5:
+            fl, fr = int(rng.integers(nl)), int(rng.integers(nr))
+            F = float(rng.uniform(0.0, 3.0)) * scale
+            Fl[fl] -= F
+            Fr[fr] += F
+        else:
+            Fl = rng.normal(0.0, scale, nl) * (rng.random(nl) < 0.5)
+            Fr = rng.normal(0.0, scale, nr) * (rng.random(nr) < 0.5)
+        forces = {"left": Fl, "right": Fr}
+    return dict(bl=bl, br=br, t0=t0, H=H, times=times, values=values, y=np.concatenate((ul, vl, ur, vr)),
+                levels=levels, forces=forces)
+
+
+def truth(case, points_extra=()):
+    """``(t, rel, rel_rate)`` per level (dense points from the proof's start: uniform 0.5 ms or
+    finer, every knot and every grid point), the relative displacement ``x_l - x_r`` of the levels."""
+    H, t0 = case["H"], case["t0"]
+    bl, br = case["bl"], case["br"]
+    nl, nr = bl.n, br.n
+    y = case["y"]
+    times = case["times"] - t0
+    grid = H * np.arange(GRID + 1) / GRID
+    knots = times[(times > 0.0) & (times < H)]
+    dense = np.unique(np.concatenate((np.linspace(0.0, H, max(int(H / 5e-4), 64) + 1), grid, knots,
+                                      np.asarray(points_extra, float))))
+    forces = case["forces"] or {"left": np.zeros(nl), "right": np.zeros(nr)}
+    # a jump (two knots at one time) is evaluated one side at a time: the oracle takes the
+    # polyline without its duplicated knots on each side, which is what the building sees
+    xl, vl = _piecewise(bl, y[:nl], y[nl:2 * nl], times, case["values"], forces["left"], dense)
+    xr, vr = _piecewise(br, y[2 * nl:2 * nl + nr], y[2 * nl + nr:], times, case["values"], forces["right"], dense)
+    fl = np.array([a for a, _ in case["levels"]])
+    fr = np.array([b for _, b in case["levels"]])
+    return dense, (xl[:, fl] - xr[:, fr]).T, (vl[:, fl] - vr[:, fr]).T
+
+
+def _piecewise(b, u0, v0, times, values, force, points):
+    """exact_motion across a jump: restarted at it (the state carries over)."""
+    dup = np.flatnonzero((np.diff(times) == 0.0) & (times[1:] > 0.0) & (times[1:] < points.max()))
+    if dup.size == 0:
+        return exact_motion(b, u0, v0, times, values, force, points)
+    T = float(times[dup[0]])
+    first = points <= T
+    pre_t, pre_v = times[:dup[0] + 1], values[:dup[0] + 1]
+    pre_t = np.concatenate((pre_t, [T + 1.0]))
+    pre_v = np.concatenate((pre_v, [pre_v[-1]]))
+    xa, va = exact_motion(b, u0, v0, pre_t, pre_v, force, np.concatenate((points[first], [T])))
+    post_t, post_v = times[dup[0] + 1:] - T, values[dup[0] + 1:]
+    post_t = np.concatenate(([-1.0], post_t))
+    post_v = np.concatenate(([post_v[0]], post_v))
+    xb, vb = _piecewise(b, xa[-1], va[-1], post_t, post_v, force, points[~first] - T)
+    return np.vstack((xa[:-1], xb)), np.vstack((va[:-1], vb))
+
+
+def proof(case, gaps, H=None, which=None):
+    """Each level's proven horizon (s) with the gaps ``gaps``."""
+    H = case["H"] if H is None else H
+    levels = [("left", fl, "right", fr, float(g)) for (fl, fr), g in zip(case["levels"], gaps)]
+    nl, nr = case["bl"].n, case["br"].n
+    buildings = {"left": (case["bounds"][0], np.arange(nl), nl + np.arange(nl)),
+                 "right": (case["bounds"][1], 2 * nl + np.arange(nr), 2 * nl + nr + np.arange(nr))}
+    return OpenGaps(buildings, levels).horizons(case["y"], H, GroundAhead(case["times"], case["values"],
+                                                                           case["t0"], H), case["forces"], which)
+
+
+def smallest_accepted(case, target: float, lo: np.ndarray, hi: np.ndarray, iterations: int = 40) -> np.ndarray:
+    """Per level, the smallest gap (m, to 2^-iterations of the bracket) proven open over ``target``
+    (s): bisection (the proof's horizon grows with the gap)."""
+    lo, hi = lo.copy(), hi.copy()
+    for _ in range(60):                             # widen hi until every level passes
+        ok = np.array(proof(case, hi)) >= target
+        if ok.all():
+            break
+        hi = np.where(ok, hi, hi + 2.0 * (hi - lo) + 1e-3)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        ok = np.array(proof(case, mid)) >= target
+        hi = np.where(ok, mid, hi)
+        lo = np.where(ok, lo, mid)
+    return hi
+
+
+def test_oracle_is_the_motion():
+    """The oracle against solve_ivp (DOP853, rtol 1e-11: tests/test_gap_bound.py's, itself checked
+    against the exact zero-order-hold step) and against building.fmu's own exact integrator, on
+    random buildings, states, records with knots between the points, and held forces."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    from fmu_src.hysteresis import StoreyHysteresis
+    from test_gap_bound import motion
+    rng = np.random.default_rng(5)
+    for case in range(6):
+        b = random_building(rng)
+        n = b.n
+        u0, v0 = rng.normal(0, 0.03, n), rng.normal(0, 0.5, n)
+        force = rng.normal(0, 3e5, n)
+        H = 0.33
+        times = np.concatenate(([-0.1], np.sort(rng.uniform(0.0, H, 25)), [H + 0.1]))
+        values = rng.normal(0, 4.0, times.size)
+        points = np.linspace(0.0, H, 34)
+        x, v = exact_motion(b, u0, v0, times, values, force, points)
+        ref = motion(b, u0, v0, times, values, force, H, points)
+        # 1e-9 m: solve_ivp's tolerance (rtol 1e-11, atol 1e-14) on motions of ~1e-2 m
+        np.testing.assert_allclose(x, ref, rtol=0, atol=1e-9)
+        integ = ExactPiecewiseLinear(b, StoreyHysteresis("linear"))
+        state = integ.initial_state(u0, v0)
+        for a, c, xk, vk in zip(points[:-1], points[1:], x[1:], v[1:]):
+            inner = times[(times > a) & (times < c)]
+            knots = np.concatenate(([a], inner, [c]))
+            integ.advance(state, knots - a, np.interp(knots, times, values), force)
+            # 1e-12 m and m/s: both exact, round-off of closed forms (~1e-13 of 1e-2)
+            np.testing.assert_allclose(state.u, xk, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(state.v, vk, rtol=0, atol=1e-11)
+    # the free mass: q = q0 + q0' t + F t^2 / 2m less the ground's double integral
+    b = ShearBuilding([300.0], [0.0], 0.0)
+    times, values = np.array([-1.0, 0.1, 1.0]), np.array([2.0, 2.0, -7.0])
+    t = np.array([0.05, 0.3])
+    x, _ = exact_motion(b, np.array([0.01]), np.array([-0.5]), times, values, np.array([600.0]), t)
+    ag2 = np.where(t <= 0.1, t * t, 0.01 + 0.2 * (t - 0.1) + (t - 0.1) ** 2) - (t - 0.1).clip(0) ** 3 / 6.0 * 10.0
+    np.testing.assert_allclose(x[:, 0], 0.01 - 0.5 * t + 1.0 * t * t - ag2, rtol=0, atol=1e-15)
+
+
+def test_hermite_max():
+    """The interpolant's maximum: a cubic is its own Hermite interpolant."""
+    t = np.array([0.0, 1.0, 3.0])
+    f = lambda s: -(s - 0.4) * (s - 0.7) * (s - 2.5)      # noqa: E731
+    df = lambda s: -((s - 0.7) * (s - 2.5) + (s - 0.4) * (s - 2.5) + (s - 0.4) * (s - 0.7))   # noqa: E731
+    got = hermite_max(t, f(t), df(t))
+    fine = np.linspace(0, 3, 300001)
+    np.testing.assert_allclose(got, [f(fine[fine <= 1]).max(), f(fine[fine >= 1]).max()], rtol=1e-9)
+
+
+MARGINS: dict = {"whole": [], "part": [], "relative": []}
+
+
+def reach(t, rel, rate, upto):
+    """The largest relative displacement over ``[0, upto]`` (m), between the points too."""
+    inside = t[1:] <= upto * (1.0 + 1e-12)
+    return hermite_max(t[:inside.size + 1][: np.count_nonzero(inside) + 1], rel[: np.count_nonzero(inside) + 1],
+                       rate[: np.count_nonzero(inside) + 1]).max()
+
+
+def check_case(case, rng, margins=None):
+    """Every level: the smallest gap proven open over the whole horizon and over a random part of
+    it lies above the true motion's reach there; and at a gap the motion reaches, the proven
+    horizon ends before the closure.  Returns the first violation (None: sound)."""
+    case["bounds"] = (ModalBound(case["bl"]), ModalBound(case["br"]))
+    t, rel, rate = truth(case)
+    H = case["H"]
+    dS = H / GRID
+    rel0 = rel[:, 0]
+    top = np.array([reach(t, r, v, H) for r, v in zip(rel, rate)])
+    k = int(rng.integers(1, GRID))
+    for target in (H, float(k) * dS):
+        accepted = smallest_accepted(case, target, rel0, top + 0.01)
+        for i in range(len(case["levels"])):
+            true = reach(t, rel[i], rate[i], target)
+            if not true < accepted[i]:
+                return dict(level=i, target=target, accepted=accepted[i], reach=true)
+            if margins is not None:
+                span = max(true - rel0[i], 1e-6)
+                margins["whole" if target == H else "part"].append(accepted[i] - true)
+                margins["relative"].append((accepted[i] - true) / span)
+    # gaps the motion reaches: the proof stops before the closure
+    gaps = rel0 + rng.uniform(0.05, 1.0, rel0.size) * (top - rel0)
+    for i, s in enumerate(proof(case, gaps)):
+        if s > 0.0 and not reach(t, rel[i], rate[i], s) < gaps[i]:
+            return dict(level=i, target=s, accepted=gaps[i], reach=reach(t, rel[i], rate[i], s))
+    return None
+
+
+CASES = 240
+CHUNKS = 4
+
+
+@pytest.mark.parametrize("chunk", range(CHUNKS))
+def test_proof_never_passes_the_true_motion(chunk):
+    rng = np.random.default_rng(2500 + chunk)
+    for n in range(CASES // CHUNKS):
+        case = make_case(rng)
+        bad = check_case(case, rng, MARGINS)
+        assert bad is None, (chunk, n, case["H"], bad)
