@@ -195,31 +195,67 @@ def random_record(rng, t0: float, H: float):
     return times, values
 
 
+def grid_spikes(rng, t0: float, H: float):
+    """A record zero at every grid point of the horizon with a spike (30 to 60 m/s^2, either sign) midway
+    between some of them (and zero elsewhere): the polyline through the grid values is zero, only
+    the bend bound sees it."""
+    dS = H / GRID
+    grid = t0 + dS * np.arange(-40, GRID + 41)
+    mid = grid[:-1] + dS * rng.uniform(0.3, 0.7, grid.size - 1)
+    peak = rng.choice([-1.0, 1.0], mid.size) * rng.uniform(30.0, 60.0, mid.size) * (rng.random(mid.size) < 0.3)
+    times = np.empty(2 * grid.size - 1)
+    values = np.zeros(times.size)
+    times[0::2], times[1::2], values[1::2] = grid, mid, peak
+    return times, values
+
+
 def make_case(rng):
-    """A pair of buildings, levels, a state, a ground and held forces, as OpenGaps takes them."""
-    free = rng.random() < 0.08
-    if free:
+    """A pair of buildings, levels, a state, a ground and held forces, as OpenGaps takes them.
+
+    Regimes: *any* (random states, fast closing velocities), *ground* (near rest, a stiff building
+    against a flexible one, a strong record or spikes between the grid points: the ground's own
+    motion is what moves the gap), *force* (near rest, a held force, weak or no ground), *free*
+    (two free masses)."""
+    regime = rng.choice(["any", "ground", "force", "free"], p=[0.45, 0.3, 0.17, 0.08])
+    if regime == "free":
         bl = ShearBuilding([float(rng.uniform(100, 1e4))], [0.0], 0.0)
         br = ShearBuilding([float(rng.uniform(100, 1e4))], [0.0], 0.0)
     else:
         bl, br = random_building(rng), random_building(rng)
+    if regime == "ground" and rng.random() < 0.8:   # a stiff and a flexible building
+        stiff, soft = (float(rng.uniform(0.08, 0.3)), float(rng.uniform(1.5, 3.0)))
+        if rng.random() < 0.5:
+            stiff, soft = soft, stiff
+        bl = ShearBuilding.from_period(stiff, bl.masses, bl.stiffnesses, bl.damping_ratio, bl.damping)
+        br = ShearBuilding.from_period(soft, br.masses, br.stiffnesses, br.damping_ratio, br.damping)
     nl, nr = bl.n, br.n
     t0 = float(rng.uniform(0.0, 10.0))
     H = random_horizon(rng)
-    times, values = random_record(rng, t0, H)
+    if regime == "ground" and rng.random() < 0.4:
+        times, values = grid_spikes(rng, t0, H)
+    else:
+        times, values = random_record(rng, t0, H)
+        if regime == "ground":
+            values = values * rng.uniform(1.0, 3.0)
+        elif regime == "force":
+            values = values * float(rng.choice([0.0, 0.05]))
     speed = float(rng.choice([0.05, 0.3, 1.0]))
-    ul, ur = rng.normal(0.0, 0.03, nl), rng.normal(0.0, 0.03, nr)
+    if regime in ("ground", "force"):
+        speed = float(rng.choice([0.0, 1e-4, 1e-3]))
+    size = 0.03 if regime in ("any", "free") else 0.1 * speed
+    ul, ur = rng.normal(0.0, size, nl), rng.normal(0.0, size, nr)
     vl, vr = rng.normal(0.0, speed, nl), rng.normal(0.0, speed, nr)
     if rng.random() < 0.5:                          # closing fast: left moves right, right moves left
         vl, vr = np.abs(vl) + speed, -np.abs(vr) - speed
     levels = sorted({(int(rng.integers(nl)), int(rng.integers(nr))) for _ in range(int(rng.integers(1, 4)))})
     forces = None
-    if rng.random() < 0.5:                          # held forces: a contact's (-F left, +F right), or any
+    if regime == "force" or (regime != "ground" and rng.random() < 0.5):
+        # held forces: a contact's (-F left, +F right), or any
         Fl, Fr = np.zeros(nl), np.zeros(nr)
-        scale = 1e3 if free else 3e5
+        scale = 1e3 if regime == "free" else 3e5
         if rng.random() < 0.5:
             fl, fr = int(rng.integers(nl)), int(rng.integers(nr))
-            F = float(rng.uniform(0.0, 3.0)) * scale
+            F = float(rng.uniform(0.1, 3.0)) * scale
             Fl[fl] -= F
             Fr[fr] += F
         else:
@@ -227,7 +263,7 @@ def make_case(rng):
             Fr = rng.normal(0.0, scale, nr) * (rng.random(nr) < 0.5)
         forces = {"left": Fl, "right": Fr}
     return dict(bl=bl, br=br, t0=t0, H=H, times=times, values=values, y=np.concatenate((ul, vl, ur, vr)),
-                levels=levels, forces=forces)
+                levels=levels, forces=forces, regime=str(regime))
 
 
 def truth(case, points_extra=()):
@@ -397,3 +433,98 @@ def test_proof_never_passes_the_true_motion(chunk):
         case = make_case(rng)
         bad = check_case(case, rng, MARGINS)
         assert bad is None, (chunk, n, case["H"], bad)
+
+
+# -- the fuzz can fail: each term of the proofs broken in a copy of the module --------------------------
+#: (name, text in gap_bound.py, its replacement): a mutant of the proof that is unsound
+MUTATIONS = {
+    # _ExactPair: the bend of the record between grid points left out
+    "exact: no bend bound": ("        upper += residual_rows[:m] * rest[1:]\n        upper += residual_rows[m:] * rest[1:]\n", ""),
+    # _ExactPair: the bend taken at the interval's start, not its end
+    "exact: bend at the interval's start": ("        upper += residual_rows[:m] * rest[1:]\n", "        upper += residual_rows[:m] * rest[:-1]\n"),
+    # _ExactPair: the rate slack halved
+    "exact: rate slack halved": ("        half *= dS\n", "        half *= 0.5 * dS\n"),
+    # _ExactPair: the rate bound without what the ground adds to it
+    "exact: no ground in the rate bound": ("        half = self._ground_gain * integral[1:]\n",
+                                           "        half = 0.0 * self._ground_gain * integral[1:]\n"),
+    # _ExactPair: held forces not moving the floors / not in the rate bound
+    "exact: held force left out": ("                delta += moved if sign > 0.0 else -moved\n", ""),
+    "exact: held force not in the rate bound": (
+        "                half += (0.5 * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]\n", ""),
+    # _ExactPair: the last grid interval (the horizon's end) not checked
+    "exact: horizon's end unchecked": ("        bad = upper >= 0.0\n        first = bad.argmax(axis=1).tolist()\n"
+                                       "        hit = _ANY(bad, axis=1).tolist()\n        for pos, c, f, h in zip(self.positions, closed",
+                                       "        bad = upper >= 0.0\n        bad[:, -1] = False\n        first = bad.argmax(axis=1).tolist()\n"
+                                       "        hit = _ANY(bad, axis=1).tolist()\n        for pos, c, f, h in zip(self.positions, closed"),
+    # every other grid interval checked (a coarser grid)
+    "exact: every other interval checked": ("        bad = upper >= 0.0\n        first = bad.argmax(axis=1).tolist()\n"
+                                            "        hit = _ANY(bad, axis=1).tolist()\n        for pos, c, f, h in zip(self.positions, closed",
+                                            "        bad = upper >= 0.0\n        bad[:, 1::2] = False\n        first = bad.argmax(axis=1).tolist()\n"
+                                            "        hit = _ANY(bad, axis=1).tolist()\n        for pos, c, f, h in zip(self.positions, closed"),
+    # the ground kernels without the first grid value's half hat
+    "kernels: first grid value left out": ("        kernels[:, :, 0] = half\n", "        kernels[:, :, 0] = 0.0\n"),
+    # int |g_grid| halved (GroundAhead.on_grid)
+    "ground: integral halved": ("np.cumsum((0.5 * self.H / GRID)", "np.cumsum((0.25 * self.H / GRID)"),
+    # _LinearPair (horizons < EXACT_MIN_HORIZON, free masses): rate slack halved, forced bound at the start
+    "linear: rate slack halved": ("        upper += self._half_rate * dS\n", "        upper += 0.5 * self._half_rate * dS\n"),
+    "linear: forced bound at the interval's start": ("        np.multiply(ground_rows, ground[1:], out=forced)\n",
+                                                     "        np.multiply(ground_rows, ground[:-1], out=forced)\n"),
+    # running_max_abs: the knots between grid points left out of |ag|'s bound
+    "linear: knots between grid points left out": ("        _MAX(tail, prefix[k], out=tail)\n", "        pass\n"),
+    # the absolute round-off margin: not expected to be caught (it covers ~1e-13 m of round-off)
+    "exact: no round-off margin": ("EXACT_MARGIN = 1e-9\n", "EXACT_MARGIN = 0.0\n"),
+}
+
+
+def mutant(name: str):
+    """A copy of cosim.master.gap_bound with the mutation ``name`` applied."""
+    import importlib.util
+    import inspect
+    old, new = MUTATIONS[name]
+    source = inspect.getsource(gap_bound)
+    assert source.count(old) == 1, name
+    spec = importlib.util.spec_from_loader(f"gap_bound_mutant", loader=None)
+    module = importlib.util.module_from_spec(spec)
+    module.__dict__["__name__"] = "gap_bound_mutant"
+    exec(compile(source.replace(old, new), "gap_bound_mutant", "exec"), module.__dict__)
+    return module
+
+
+def first_violation(module, seeds=(2502, 2501, 2500, 2503), cases: int = CASES // CHUNKS):
+    """The fuzz's cases (the same seeds) against ``module`` (the test module's globals swapped):
+    ``(seed, case)`` of the first it fails, or None."""
+    here = globals()
+    saved = {k: here[k] for k in ("OpenGaps", "GroundAhead", "ModalBound")}
+    here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead, ModalBound=module.ModalBound)
+    try:
+        for seed in seeds:
+            rng = np.random.default_rng(seed)
+            for n in range(cases):
+                case = make_case(rng)
+                if check_case(case, rng) is not None:
+                    return seed, n
+        return None
+    finally:
+        here.update(saved)
+
+
+#: mutations the fuzz does not catch, and why: each is swamped by the rate slack's ground term,
+#: ``L dS / 2`` with ``L`` the sum of both buildings' floor rate bounds, each growing with
+#: ``|Gamma| int |g|``.  The ground moves both buildings' floors alike at first (their rigid
+#: motion), which cancels in the gap: the slack is mm where these errors are tenths of mm.  Their
+#: terms are checked directly elsewhere (tests/test_gap_bound_exact.py: kernels against solve_ivp,
+#: on_grid's bend and integral against a dense sampling); "exact: no round-off margin" covers
+#: round-off only (~1e-13 m, EXACT_MARGIN's comment)
+MASKED = {
+    "exact: bend at the interval's start": "the bend's response over one grid interval, ~|r| dS^2 / 2",
+    "ground: integral halved": "the ground's rate gain is rigid motion, cancelling in the gap",
+    "kernels: first grid value left out": "an impulse g0 dS / 2 whose differential response is below the slack "
+                                          "(caught once in 720 cases: seed 2504, case 45)",
+    "linear: forced bound at the interval's start": "the whole ground's modal-sum bound, far above the motion",
+    "exact: no round-off margin": "covers round-off (~1e-13 m)",
+}
+
+
+@pytest.mark.parametrize("name", sorted(set(MUTATIONS) - set(MASKED)))
+def test_fuzz_catches_a_broken_term(name):
+    assert first_violation(mutant(name)) is not None, name
