@@ -528,3 +528,193 @@ MASKED = {
 @pytest.mark.parametrize("name", sorted(set(MUTATIONS) - set(MASKED)))
 def test_fuzz_catches_a_broken_term(name):
     assert first_violation(mutant(name)) is not None, name
+
+
+# -- bilinear buildings: building.fmu's exact integrator through yielding is the truth --------------------
+def fmu_motion(b: ShearBuilding, law, u0, v0, slip, mode, times, values, force, points):
+    """Floor displacements and velocities (points x floors) by building.fmu's integrator
+    (:class:`~fmu_src.building_response.ExactPiecewiseLinear`) from the state ``(u0, v0, slip, mode)``,
+    stepped from point to point with the record's knots between them (one-sided values at a jump,
+    as :meth:`cosim.master.knots.GroundLookahead.cut` hands them)."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    integ = ExactPiecewiseLinear(b, law)
+    state = integ.initial_state(np.zeros(b.n), np.zeros(b.n))
+    state.u, state.v, state.slip, state.mode, state.offset = u0.copy(), v0.copy(), slip.copy(), mode.copy(), None
+    us, vs = [u0.copy()], [v0.copy()]
+    for a, c in zip(points[:-1], points[1:]):
+        inside = (times > a) & (times < c)
+        last_at_a = np.flatnonzero(times <= a)        # the later knot of a jump at a
+        first_at_c = np.flatnonzero(times >= c)        # the earlier knot of a jump at c
+        va = values[last_at_a[-1]] if times[last_at_a[-1]] == a else np.interp(a, times, values)
+        vc = values[first_at_c[0]] if times[first_at_c[0]] == c else np.interp(c, times, values)
+        knots = np.concatenate(([0.0], times[inside] - a, [c - a]))
+        integ.advance(state, knots, np.concatenate(([va], values[inside], [vc])), force)
+        us.append(state.u.copy())
+        vs.append(state.v.copy())
+    return np.array(us), np.array(vs)
+
+
+def bilinear_case(rng):
+    """Two bilinear buildings (or one and a linear one), random strengths, alpha, states elastic or
+    yielding or unloading (test_gap_bound_yielding.random_state), a record of :func:`random_record`,
+    a master's horizon, held forces sometimes: OpenGaps' arguments and the truth."""
+    from cosim.master.gap_bound import ElasticRange
+    from fmu_src.hysteresis import StoreyHysteresis
+    from test_gap_bound_yielding import random_state
+    H = float(rng.choice([random_horizon(rng), 0.33, 0.16 + 1e-9 * 0.01]))
+    H = min(H, 0.4)
+    t0 = float(rng.uniform(0.0, 10.0))
+    times, values = random_record(rng, t0, H)
+    alpha = float(rng.choice([0.0, 0.05, 0.2, 0.5]))
+    mixed = rng.random() < 0.15
+    buildings, elastic, yielded, y, states = {}, {}, {}, [], []
+    offset = 0
+    elastic_start = rng.random() < 0.6
+    if elastic_start:               # a weaker ground: the buildings stay elastic over much of the horizon
+        values = values * rng.uniform(0.1, 0.5)
+    for side in ("left", "right"):
+        n = int(rng.integers(1, 6))
+        b = ShearBuilding.from_period(float(rng.uniform(0.2, 1.5)), rng.uniform(0.5, 2.0, n) * 3e5,
+                                      rng.uniform(0.5, 2.0, n), float(rng.choice([0.02, 0.05])),
+                                      "modal" if rng.random() < 0.3 else "rayleigh")
+        # yield drifts of 5 to 20 mm; an elastic start stays elastic longer: 20 to 60 mm
+        fy = b.stiffnesses * (rng.uniform(0.02, 0.06, n) if elastic_start else rng.uniform(0.005, 0.02, n))
+        linear = mixed and side == "right"
+        law = StoreyHysteresis("linear") if linear else StoreyHysteresis("bilinear", fy, alpha)
+        if linear:
+            u0, v0 = rng.normal(0, 0.02, n), rng.normal(0, 0.3, n)
+            slip, mode = np.zeros(n), np.zeros(n, dtype=np.int64)
+        elif elastic_start:
+            dy = law.yield_drift(b.stiffnesses)
+            slip = rng.uniform(-1.0, 1.0, n) * dy
+            u0 = np.cumsum(slip + rng.uniform(-0.3, 0.3, n) * dy)
+            v0 = np.cumsum(rng.uniform(-0.05, 0.05, n)) + (0.2 if side == "left" else -0.2) * rng.random()
+            mode = np.zeros(n, dtype=np.int64)
+        else:
+            u0, v0, slip, mode = random_state(rng, b, law)
+        ix, iv, ir = (offset + np.arange(n) + k * n for k in range(3))
+        offset += 3 * n if not linear else 2 * n
+        buildings[side] = (ModalBound(b), ix, iv)
+        if not linear:
+            elastic[side] = ElasticRange(alpha, law.yield_drift(b.stiffnesses), ir)
+            yielded[side] = ModalBound.through_yielding(b, alpha, fy)
+            y += [u0, v0, (1.0 - alpha) * slip]
+        else:
+            y += [u0, v0]
+        states.append((b, law, u0, v0, slip, mode))
+    nl, nr = states[0][0].n, states[1][0].n
+    levels = sorted({(int(rng.integers(nl)), int(rng.integers(nr))) for _ in range(int(rng.integers(1, 3)))})
+    forces = None
+    if rng.random() < 0.25:
+        fl, fr = levels[0]
+        F = float(rng.uniform(0.1, 2.0)) * 3e5
+        forces = {"left": np.where(np.arange(nl) == fl, -F, 0.0), "right": np.where(np.arange(nr) == fr, F, 0.0)}
+    rel_times = times - t0
+    grid = H * np.arange(GRID + 1) / GRID
+    knots = rel_times[(rel_times > 0.0) & (rel_times < H)]
+    dense = np.unique(np.concatenate((np.linspace(0.0, H, max(int(H / 1e-3), 64) + 1), grid, knots)))
+    motions = []
+    for (b, law, u0, v0, slip, mode), side in zip(states, ("left", "right")):
+        force = np.zeros(b.n) if forces is None else forces[side]
+        motions.append(fmu_motion(b, law, u0, v0, slip, mode, rel_times, values, force, dense))
+    fl = np.array([a for a, _ in levels])
+    fr = np.array([c for _, c in levels])
+    (xl, vl), (xr, vr) = motions
+    return dict(H=H, t0=t0, times=times, values=values, y=np.concatenate(y), levels=levels, forces=forces,
+                buildings=buildings, elastic=elastic, yielded=yielded, truth=(dense, (xl[:, fl] - xr[:, fr]).T,
+                                                                              (vl[:, fl] - vr[:, fr]).T))
+
+
+def bilinear_proof(case, gaps, H=None):
+    H = case["H"] if H is None else H
+    levels = [("left", fl, "right", fr, float(g)) for (fl, fr), g in zip(case["levels"], gaps)]
+    gaps_ = OpenGaps(case["buildings"], levels, case["elastic"], case["yielded"])
+    return gaps_.horizons(case["y"], H, GroundAhead(case["times"], case["values"], case["t0"], H), case["forces"])
+
+
+BILINEAR_MARGINS: list = []
+BILINEAR_CASES = 36
+
+
+def bilinear_violation(seed: int, count: int, margins=None):
+    """The first of ``count`` bilinear cases (seeded) where the smallest gap the proof accepts over
+    the whole horizon or a random part of it does not lie above building.fmu's motion there:
+    ``(case, level, target, accepted, reach)``, or None."""
+    rng = np.random.default_rng(seed)
+    for n in range(count):
+        case = bilinear_case(rng)
+        t, rel, rate = case["truth"]
+        H = case["H"]
+        rel0 = rel[:, 0]
+        top = np.array([reach(t, r, v, H) for r, v in zip(rel, rate)])
+        for target in (H, float(rng.integers(1, GRID)) * H / GRID):
+            lo, hi = rel0.copy(), top + 0.01
+            for _ in range(60):
+                ok = np.array(bilinear_proof(case, hi)) >= target
+                if ok.all():
+                    break
+                hi = np.where(ok, hi, hi + 2.0 * (hi - lo) + 1e-3)
+            for _ in range(36):
+                mid = 0.5 * (lo + hi)
+                ok = np.array(bilinear_proof(case, mid)) >= target
+                hi, lo = np.where(ok, mid, hi), np.where(ok, lo, mid)
+            for i in range(len(case["levels"])):
+                true = reach(t, rel[i], rate[i], target)
+                # 1e-10 m: the integrator's round-off and event location (1e-12 of a step) over
+                # a few hundred steps of cm motions
+                if not true < hi[i] + 1e-10:
+                    return n, i, target, hi[i], true
+                if margins is not None:
+                    margins.append(hi[i] - true)
+    return None
+
+
+@pytest.mark.parametrize("chunk", range(2))
+def test_bilinear_proof_never_passes_the_true_motion(chunk):
+    """Bilinear buildings (elastic starts under a weaker ground: the linear proof with the ground's
+    response computed, _BilinearPair; yielding and unloading starts: through yielding), one
+    against a linear building (the per-building proof), held forces: the smallest gap each proof
+    accepts over the whole horizon and a random part of it lies above building.fmu's own motion."""
+    assert bilinear_violation(3100 + chunk, BILINEAR_CASES // 2, BILINEAR_MARGINS) is None
+
+
+BILINEAR_MUTATIONS = {
+    # _BilinearPair's exact gap proof: the rate slack halved
+    "bilinear exact: rate slack halved": ("                upper += 0.5 * dS * (rate[Fl] + rate[Fr])\n",
+                                          "                upper += 0.25 * dS * (rate[Fl] + rate[Fr])\n"),
+    # the proof through yielding without the storeys' plastic forces
+    "through yielding: no plastic term": ("        forced = forced + plastic\n        return free, forced, rate",
+                                          "        return free, forced, rate"),
+}
+MUTATIONS.update(BILINEAR_MUTATIONS)
+#: bilinear mutations the fuzz does not catch (72 cases): masked by the rate slack as above, or
+#: by the through-yielding bound's width (a linear span taken a few grid intervals too long moves
+#: the floors by far less than that bound's slack)
+MASKED.update({
+    "bilinear exact: no bend": "the bend's bound, as for linear buildings",
+    "bilinear exact: no ground in the rate": "the ground's rate gain, as for linear buildings",
+    "bilinear: elastic band without slack": "a storey's yielding a grid interval late changes the floors little",
+    "bilinear: linear span ignored": "the same, over the rest of a horizon (caught once in 72 cases before the "
+                                     "elastic starts were made weaker)",
+})
+MUTATIONS.update({
+    "bilinear exact: no bend": ("            forced = rows_ground * rest\n", "            forced = 0.0 * rows_ground * rest\n"),
+    "bilinear exact: no ground in the rate": ("            rate = rate[:, None] + self._rows_gain * integral[1:]\n",
+                                              "            rate = rate[:, None] + 0.0 * self._rows_gain * integral[1:]\n"),
+    "bilinear: elastic band without slack": ("        bad = mid + slack >= hi[:, None]\n        bad |= mid - slack <= lo[:, None]\n"
+                                             "        spans = []",
+                                             "        bad = mid >= hi[:, None]\n        bad |= mid <= lo[:, None]\n        spans = []"),
+    "bilinear: linear span ignored": ("            s = min(s_l, s_r)\n            fl, Fl", "            s = H\n            fl, Fl"),
+})
+
+
+@pytest.mark.parametrize("name", sorted(BILINEAR_MUTATIONS))
+def test_bilinear_fuzz_catches_a_broken_term(name):
+    module = mutant(name)
+    here = globals()
+    saved = here["OpenGaps"], here["GroundAhead"]
+    here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead)
+    try:
+        assert bilinear_violation(3100, 24) is not None, name
+    finally:
+        here["OpenGaps"], here["GroundAhead"] = saved
