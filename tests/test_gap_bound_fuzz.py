@@ -490,7 +490,7 @@ def mutant(name: str):
     return module
 
 
-def first_violation(module, seeds=(2502, 2501, 2500, 2503), cases: int = CASES // CHUNKS):
+def first_violation(module, seeds=(2503, 2502, 2501, 2500), cases: int = CASES // CHUNKS):
     """The fuzz's cases (the same seeds) against ``module`` (the test module's globals swapped):
     ``(seed, case)`` of the first it fails, or None."""
     here = globals()
@@ -716,5 +716,63 @@ def test_bilinear_fuzz_catches_a_broken_term(name):
     here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead)
     try:
         assert bilinear_violation(3100, 24) is not None, name
+    finally:
+        here["OpenGaps"], here["GroundAhead"] = saved
+
+
+def test_reused_proofs_answer_as_fresh_ones():
+    """The master keeps one OpenGaps for a run and proves from many states, horizons, grounds,
+    forces and level subsets (its pairs cache per state, per horizon and per grouping): every
+    answer equals that of a fresh OpenGaps, bit for bit (a stale cache would prove an old
+    state's gap)."""
+    rng = np.random.default_rng(77)
+    for kind in ("linear",) * 4 + ("bilinear",) * 3:
+        case = make_case(rng) if kind == "linear" else bilinear_case(rng)
+        if kind == "linear":
+            case["bounds"] = (ModalBound(case["bl"]), ModalBound(case["br"]))
+            nl, nr = case["bl"].n, case["br"].n
+            buildings = {"left": (case["bounds"][0], np.arange(nl), nl + np.arange(nl)),
+                         "right": (case["bounds"][1], 2 * nl + np.arange(nr), 2 * nl + nr + np.arange(nr))}
+            extra = ({}, {})
+        else:
+            buildings = case["buildings"]
+            extra = (case["elastic"], case["yielded"])
+        rel0 = case["truth"][1][:, 0] if kind == "bilinear" else truth(case)[1][:, 0]
+        levels = [("left", fl, "right", fr, float(g)) for (fl, fr), g in
+                  zip(case["levels"], rel0 + rng.uniform(0.001, 0.05, rel0.size))]
+        reused = OpenGaps(buildings, levels, *extra)
+        states = [case["y"] + rng.normal(0.0, 0.002, case["y"].size) * (k > 0) for k in range(3)]
+        for _ in range(60):
+            y = states[int(rng.integers(3))]
+            H = float(rng.choice([0.01 + 1e-11, 0.02, 0.04 + 1e-11, 0.08, 0.16 + 1e-11, 0.33, 0.05]))
+            t0 = case["t0"] + float(rng.choice([0.0, 0.01, 0.013]))
+            ground = GroundAhead(case["times"], case["values"], t0, H)
+            forces = None if kind == "bilinear" or rng.random() < 0.5 else case["forces"]
+            which = None if rng.random() < 0.5 or len(levels) < 2 else [len(levels) - 1]
+            got = reused.horizons(y, H, ground, forces, which)
+            fresh = OpenGaps(buildings, levels, *extra).horizons(y, H, GroundAhead(case["times"], case["values"], t0, H),
+                                                                 forces, which)
+            assert got == fresh, (kind, H, which)
+
+
+CACHE_MUTATIONS = {
+    # a pair that keeps its first state whatever it reads
+    "stale linear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        bl, br = self.bounds\n",
+                           "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        bl, br = self.bounds\n"),
+    "stale bilinear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        n, nl",
+                             "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        n, nl"),
+}
+MUTATIONS.update(CACHE_MUTATIONS)
+
+
+@pytest.mark.parametrize("name", sorted(CACHE_MUTATIONS))
+def test_reuse_check_catches_a_stale_cache(name):
+    module = mutant(name)
+    here = globals()
+    saved = here["OpenGaps"], here["GroundAhead"]
+    here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead)
+    try:
+        with pytest.raises(AssertionError):
+            test_reused_proofs_answer_as_fresh_ones()
     finally:
         here["OpenGaps"], here["GroundAhead"] = saved
