@@ -776,3 +776,78 @@ def test_reuse_check_catches_a_stale_cache(name):
             test_reused_proofs_answer_as_fresh_ones()
     finally:
         here["OpenGaps"], here["GroundAhead"] = saved
+
+
+# -- how tight: the smallest accepted gap against the motion's reach, on the default scene's pair ---------
+def default_pair_states(count: int, seed: int = 0):
+    """The default scene's buildings (left 3 storeys T1 0.5 s, right 5 storeys T1 1.0 s, 3e5 kg floors,
+    5 % Rayleigh) from rest under El Centro 1940 at 0.3 g (no contact), by building.fmu's
+    integrator in 0.02 s steps: their states at ``count`` random times of the strong motion."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    from fmu_src.ground_records import load_record
+    from fmu_src.hysteresis import StoreyHysteresis
+    record = load_record("elcentro1940")
+    times = np.concatenate(([-1.0], record.times, [record.times[-1] + 10.0]))
+    values = np.concatenate(([0.0], record.acceleration * (2.942 / record.pga), [0.0]))
+    starts = np.sort(np.random.default_rng(seed).uniform(1.0, 12.0, count))
+    pair = (ShearBuilding.from_period(0.5, [3e5] * 3, [1.0] * 3, 0.05),
+            ShearBuilding.from_period(1.0, [3e5] * 5, [1.0] * 5, 0.05))
+    states = []
+    for b in pair:
+        integ = ExactPiecewiseLinear(b, StoreyHysteresis("linear"))
+        state = integ.initial_state(np.zeros(b.n), np.zeros(b.n))
+        t, mine = 0.0, []
+        for t1 in starts:
+            while t < t1 - 1e-12:
+                c = min(t + 0.02, t1)
+                inside = (times > t) & (times < c)
+                knots = np.concatenate(([t], times[inside], [c]))
+                integ.advance(state, knots - t, np.interp(knots, times, values), np.zeros(b.n))
+                t = c
+            mine.append(np.concatenate((state.u, state.v)))
+        states.append(mine)
+    return pair, times, values, starts, [np.concatenate(s) for s in zip(*states)]
+
+
+def test_accepted_gap_is_the_stated_bound_and_how_tight():
+    """The smallest gap the exact proof accepts over a long step (0.32 s + slack) equals, to
+    round-off, the bound its docstring states, rebuilt here from the oracle's motion under the grid
+    polyline: ``max_k (delta_k + delta_k+1) / 2 + L_k dS / 2 + bend_k + EXACT_MARGIN`` (``L_k`` the
+    floors' modal rate bounds with the ground's integral, ``bend_k`` the modal-sum bound of the
+    bend); so the margins measured are the proof's, not the bisection's.  Printed (``-s``): the
+    margin over the motion's reach, and what a bound by the gap's curvature would leave
+    (``max(delta_k, delta_k+1) + kappa_k dS^2 / 8``, ``kappa_k = sum_j |Phi_fj| (1 + 2 zeta_j) w_j
+    A_j``: the ground's own acceleration cancels in ``x_l'' - x_r''``)."""
+    (bl, br), times, values, starts, ys = default_pair_states(8)
+    H = 0.32 + 1e-9 * 0.01
+    dS = H / GRID
+    grid = H * np.arange(GRID + 1) / GRID
+    bounds = (ModalBound(bl), ModalBound(br))
+    margins, curvature = [], []
+    for t0, y in zip(starts, ys):
+        case = dict(bl=bl, br=br, t0=float(t0), H=H, times=times, values=values, y=y, levels=[(2, 2)],
+                    forces=None, bounds=bounds)
+        t, rel, rate = truth(case)
+        top = reach(t, rel[0], rate[0], H)
+        accepted = smallest_accepted(case, H, rel[:, 0], np.array([top + 0.01]))[0]
+        g, rest, integral = GroundAhead(times, values, float(t0), H).on_grid()
+        polyline = (np.concatenate(([-1.0], grid, [H + 1.0])), np.concatenate(([g[0]], g, [g[-1]])))
+        slack, kappa, bend = 0.0, 0.0, 0.0
+        delta = 0.0
+        for b, bound, x0, v0, sign in ((bl, bounds[0], y[:3], y[3:6], 1.0), (br, bounds[1], y[6:11], y[11:], -1.0)):
+            x, _ = exact_motion(b, x0, v0, *polyline, np.zeros(b.n), grid)
+            delta = delta + sign * x[:, 2]
+            A = (np.sqrt((bound.w * (bound.to_modal @ x0)) ** 2 + (bound.to_modal @ v0) ** 2)[:, None]
+                 + np.abs(bound.gamma)[:, None] * integral[None, 1:])
+            slack = slack + np.abs(bound.phi[2]) @ A
+            kappa = kappa + (np.abs(bound.phi[2]) * (1.0 + 2.0 * bound.zeta) * bound.w) @ A
+            bend = bend + bound._cached(H)[4][2, 1:] * rest[1:]
+        stated = np.max(0.5 * (delta[:-1] + delta[1:]) + 0.5 * dS * slack + bend + gap_bound.EXACT_MARGIN)
+        # 1e-12 m: the bisection's resolution (2^-40 of a cm bracket) and round-off
+        assert abs(stated - accepted) <= 1e-12, (t0, stated, accepted)
+        margins.append(accepted - top)
+        curvature.append(np.max(np.maximum(delta[:-1], delta[1:]) + kappa * dS * dS / 8.0 + bend) - top)
+    print(f"\ndefault pair, H = 0.32 s: margin of the proof {np.median(margins) * 1e3:.3f} mm median "
+          f"({np.min(margins) * 1e3:.3f} to {np.max(margins) * 1e3:.3f}); by the curvature "
+          f"{np.median(curvature) * 1e3:.4f} mm ({np.min(curvature) * 1e3:.4f} to {np.max(curvature) * 1e3:.4f})")
+    assert np.all(np.array(margins) > 0.0)
