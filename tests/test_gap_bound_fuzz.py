@@ -186,8 +186,8 @@ def random_record(rng, t0: float, H: float):
         values = np.concatenate((values[keep], rng.choice([-1.0, 1.0], spikes.size) * rng.uniform(10, 30, spikes.size)))
         order = np.argsort(times)
         times, values = times[order], values[order]
-    if kind == 4 and rng.random() < 0.5:   # a jump (record start or end) at an interior grid point
-        T = t0 + H * int(rng.integers(1, GRID)) / GRID
+    if kind == 4 and rng.random() < 0.7:   # a jump (record start or end) at a grid point, the start included, or anywhere
+        T = t0 + H * (int(rng.integers(0, GRID)) if rng.random() < 0.7 else float(rng.uniform(0, GRID))) / GRID
         before = times < T
         at = float(np.interp(T, times, values))
         times = np.concatenate((times[before], [T, T], times[~before]))
@@ -289,7 +289,11 @@ def truth(case, points_extra=()):
 
 
 def _piecewise(b, u0, v0, times, values, force, points):
-    """exact_motion across a jump: restarted at it (the state carries over)."""
+    """exact_motion across a jump: restarted at it (the state carries over); at the start, the later
+    value counts (what the building's first knot is, GroundLookahead.cut)."""
+    at_start = np.flatnonzero((np.diff(times) == 0.0) & (times[1:] == 0.0))
+    if at_start.size:
+        times, values = np.delete(times, at_start), np.delete(values, at_start)
     dup = np.flatnonzero((np.diff(times) == 0.0) & (times[1:] > 0.0) & (times[1:] < points.max()))
     if dup.size == 0:
         return exact_motion(b, u0, v0, times, values, force, points)
@@ -715,7 +719,9 @@ def test_bilinear_fuzz_catches_a_broken_term(name):
     saved = here["OpenGaps"], here["GroundAhead"]
     here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead)
     try:
-        assert bilinear_violation(3100, 24) is not None, name
+        # the exact pair's rate slack is caught in 1 of these 4 seeds (24 cases each), the plastic
+        # term in 3: the bilinear cases meet few peaks between grid points near a grazing gap
+        assert any(bilinear_violation(seed, 24) is not None for seed in (3102, 3100, 3101, 3103)), name
     finally:
         here["OpenGaps"], here["GroundAhead"] = saved
 
