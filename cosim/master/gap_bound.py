@@ -470,6 +470,37 @@ def _as_slice(index: np.ndarray):
     return index
 
 
+def _answer(upper: np.ndarray, now: np.ndarray, positions, out: list, dS: float, H: float, limit: float) -> None:
+    """Each level's horizon into ``out`` at its position from its grid intervals' upper bounds
+    ``upper`` (levels x intervals) and its penetration ``now`` (m): up to its first interval that
+    may close, else ``H``, at most ``limit`` (s); a gap closed now is left as it is (0)."""
+    bad = upper >= 0.0
+    first = bad.argmax(axis=1).tolist()
+    hit = _ANY(bad, axis=1).tolist()
+    for pos, c, f, h in zip(positions, (now >= 0.0).tolist(), first, hit):
+        if not c:
+            out[pos] = min(limit, float(f) * dS if h else H)
+
+
+#: horizons whose stacked tables a pair keeps (a run's proofs use a few: the dyadic steps' nominal
+#: lengths and the quiet proofs' reach)
+_HORIZONS_KEPT = 64
+
+
+def _stacked_tables(cache: dict, key, bounds, parts) -> tuple:
+    """``cache[key]``: the tables of two buildings' :meth:`ModalBound._cached` at a horizon stacked,
+    left rows then right, one array per part; made the first time (the horizon is ``key``, or its
+    last element) and kept while the cache holds at most :data:`_HORIZONS_KEPT` (the oldest goes).
+    ``parts`` takes both buildings' cached tuples and returns the pairs of arrays to stack."""
+    tables = cache.get(key)
+    if tables is None:
+        if len(cache) > _HORIZONS_KEPT:
+            cache.pop(next(iter(cache)))
+        H = key[-1] if isinstance(key, tuple) else key
+        tables = cache[key] = tuple(np.vstack(pair) for pair in parts(*(b._cached(H) for b in bounds)))
+    return tables
+
+
 class _LinearPair:
     """The levels between two linear buildings, proven as :meth:`OpenGaps.horizons` does with
     fewer numpy calls (each ~1 us: their count is a proof's cost), bit for bit:
@@ -535,14 +566,10 @@ class _LinearPair:
         self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
-        tables = self._by_h.get(H)
-        if tables is None:
-            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
-                self._by_h.pop(next(iter(self._by_h)))
-            cl, cr = (b._cached(H) for b in self.bounds)
-            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
-                                      np.vstack((cl[4][self.fl, 1:], cr[4][self.fr, 1:])))
-        return tables
+        """``(Ac, As, ground rows of the levels' floors)`` of both buildings, stacked."""
+        fl, fr = self.fl, self.fr
+        return self._by_h.get(H) or _stacked_tables(self._by_h, H, self.bounds, lambda cl, cr: (
+            (cl[1], cr[1]), (cl[2], cr[2]), (cl[4][fl, 1:], cr[4][fr, 1:])))
 
     def _state(self, y: np.ndarray) -> None:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
@@ -754,12 +781,7 @@ class _ExactPair(_LinearPair):
         upper += residual_rows[:m] * rest[1:]
         upper += residual_rows[m:] * rest[1:]
         upper += EXACT_MARGIN
-        closed = (delta[:, 0] >= 0.0).tolist()
-        bad = upper >= 0.0
-        first = bad.argmax(axis=1).tolist()
-        hit = _ANY(bad, axis=1).tolist()
-        for pos, c, f, h in zip(self.positions, closed, first, hit):
-            out[pos] = 0.0 if c else (float(f) * dS if h else H)
+        _answer(upper, delta[:, 0], self.positions, out, dS, H, H)
 
 
 class _BilinearPair:
@@ -813,25 +835,15 @@ class _BilinearPair:
         self._row_kernels: dict = {}    # H -> every row's ground kernel, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
-        tables = self._by_h.get(H)
-        if tables is None:
-            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
-                self._by_h.pop(next(iter(self._by_h)))
-            cl, cr = (b._cached(H) for b in self.bounds)
-            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
-                                      np.vstack((cl[5], cr[5])))
-        return tables
+        """``(Ac, As, ground rows of every floor and storey drift)`` of both buildings, stacked."""
+        return self._by_h.get(H) or _stacked_tables(self._by_h, H, self.bounds, lambda cl, cr: ((cl[1], cr[1]), (cl[2], cr[2]),
+                                                                          (cl[5], cr[5])))
 
     def _yielded_tables(self, H: float) -> tuple:
-        key = ("yielded", H)
-        tables = self._by_h.get(key)
-        if tables is None:
-            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
-                self._by_h.pop(next(iter(self._by_h)))
-            cl, cr = (b._cached(H) for b in self.yielded)
-            tables = self._by_h[key] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
-                                        np.vstack((cl[4], cr[4])), np.vstack((cl[6], cr[6])))
-        return tables
+        """``(Ac, As, floors' ground bound, floors' storey-force bound)`` of both bounds through
+        yielding, stacked."""
+        return self._by_h.get(("yielded", H)) or _stacked_tables(self._by_h, ("yielded", H), self.yielded, lambda cl, cr: (
+            (cl[1], cr[1]), (cl[2], cr[2]), (cl[4], cr[4]), (cl[6], cr[6])))
 
     def _read(self, y: np.ndarray) -> None:
         """The state from the reads (:meth:`OpenGaps._state` of both buildings, stacked)."""
@@ -995,13 +1007,7 @@ class _BilinearPair:
             upper += forced[Fr, 1:]
             if exact:
                 upper += EXACT_MARGIN
-            bad = upper >= 0.0
-            first = bad.argmax(axis=1).tolist()
-            hit = _ANY(bad, axis=1).tolist()
-            closed = (delta[:, 0] >= 0.0).tolist()
-            for pos, c, f, h in zip(positions, closed, first, hit):
-                if not c:
-                    out[pos] = min(s, float(f) * dS if h else H)
+            _answer(upper, delta[:, 0], positions, out, dS, H, s)
         short = [i for i, pos in enumerate(positions) if out[pos] < H]
         if not short:
             return
@@ -1413,13 +1419,7 @@ class OpenGaps:
                 upper += (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
                 upper += bl[fl, 1:]
                 upper += br[fr, 1:]
-                bad = upper >= 0.0
-                first = bad.argmax(axis=1).tolist()
-                hit = _ANY(bad, axis=1).tolist()
-                closed = (delta[:, 0] >= 0.0).tolist()
-                for pos, c, f, h in zip(positions, closed, first, hit):
-                    if not c:
-                        out[pos] = min(s, float(f) * dS if h else H)
+                _answer(upper, delta[:, 0], positions, out, dS, H, s)
             if yielded and (left in yielded or right in yielded):
                 short = [i for i, pos in enumerate(positions) if out[pos] < H]
                 if short:
