@@ -259,7 +259,7 @@ class Adaptive(CouplingStrategy):
             longest = max_long_step if row_interval is None else min(max_long_step, row_step(row_interval, self.h))
             self.long_levels = max(0, int(math.floor(math.log2(longest / self.h_max) + 1e-9)))
         # each level's floors (x1, x2, v1, v2, a1, a2) and contact outputs (F, delta) in System.y,
-        # gathered in one fancy index per try (_levels_now, _retry_step): the kinematics of every
+        # gathered in one fancy index per try (_levels_now): the kinematics of every
         # level with the same arithmetic as _Level.kinematics, without a call and six reads each
         self._level_reads = np.array([(lv.ix1, lv.ix2, lv.iv1, lv.iv2, lv.ia1, lv.ia2, lv.i_F, lv.i_delta)
                                 for lv in self.levels], dtype=np.intp).reshape(-1)
@@ -585,16 +585,15 @@ class Adaptive(CouplingStrategy):
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
         longer than that contact's contact step, else None."""
-        reads = self.system.y[self._level_reads].tolist()
+        item = self.system.y.item
         retry = None
-        for k, (lv, (d0, dd0, _)) in enumerate(zip(self.levels, start)):
+        for lv, (d0, dd0, _) in zip(self.levels, start):
             if d0 > 0.0:
                 continue
-            x1, x2, v1, v2 = reads[8 * k:8 * k + 4]
-            d1 = x1 - x2 - lv.gap                              # lv.kinematics(y), the same arithmetic
+            d1 = item(lv.ix1) - item(lv.ix2) - lv.gap          # lv.kinematics(y), the same arithmetic
             if d1 <= 0.0:
                 continue
-            dd1 = v1 - v2
+            dd1 = item(lv.iv1) - item(lv.iv2)
             v = max(dd0, dd1)
             h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
             if h <= h_contact * (1.0 + 1e-9) or h <= self.h_min * (1.0 + 1e-9):
