@@ -139,6 +139,8 @@ _ZERO = np.zeros(1)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
+#: ``np.cumsum`` of a vector without its Python wrapper
+_SUM_UP = np.add.accumulate
 try:    # np.interp's compiled core, without its Python wrapper (which only dispatches on complex values)
     from numpy._core.multiarray import interp as _interp
 except ImportError:     # pragma: no cover - numpy < 2
@@ -407,7 +409,7 @@ class FloorMotion:
             self._rows, self._abs_rows, self._rows_ground = bound.phi, bound.abs_phi, cached[4]
         else:
             self._rows, self._abs_rows, self._rows_ground = bound.rows, bound.abs_rows, cached[5]
-        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and force.any() else None
+        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and _ANY(force) else None
         # a yielding building's storey forces (ModalBound.through_yielding), on the floors only
         self._plastic = cached[6] if shift is None else None
         self._all = self._floors = None
@@ -666,7 +668,7 @@ class _LinearPair:
         if forces:
             for name, modes, floors in ((self.left, self.bounds[0], self.fl), (self.right, self.bounds[1], self.fr)):
                 force = forces.get(name)
-                if force is not None and force.any():
+                if force is not None and _ANY(force):
                     load += modes.abs_phi[floors] @ np.abs(modes.phi.T @ force)
         load *= 0.5 * H * H
         bound += load
@@ -699,7 +701,7 @@ class _LinearPair:
             for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced_l),
                                               (self.right, self.bounds[1], self.fr, forced_r)):
                 force = forces.get(name)
-                if force is not None and force.any():
+                if force is not None and _ANY(force):
                     part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
         upper += forced_l
         upper += forced_r
@@ -767,7 +769,7 @@ class _ExactPair(_LinearPair):
             s = _grid(H)
             for name, bound, floors, sign in ((self.left, bl, self.fl, 1.0), (self.right, br, self.fr, -1.0)):
                 force = forces.get(name)
-                if force is None or not force.any():
+                if force is None or not _ANY(force):
                     continue
                 load = bound.phi.T @ force                       # modal load (held)
                 step = bound.step_response(H)                     # modes x points
@@ -854,8 +856,8 @@ class _BilinearPair:
         n, nl = self.n, self.nl
         u, v, r = reads[:n], reads[n:2 * n], reads[2 * n:]
         shift = np.empty(n)
-        np.cumsum(r[:nl], out=shift[:nl])               # ElasticRange.shift_of, per building
-        np.cumsum(r[nl:], out=shift[nl:])
+        _SUM_UP(r[:nl], out=shift[:nl])                 # ElasticRange.shift_of (a cumsum), per building
+        _SUM_UP(r[nl:], out=shift[nl:])
         centre = self.centre_factor * r
         w = u - shift
         # ElasticRange.yielding: d = D w - centre, |d| >= the limit (D w's first storey is w_0 - 0.0 = w_0)
@@ -1203,11 +1205,13 @@ class GroundAhead:
         else:
             rest = np.zeros(GRID + 1)
         size = np.abs(g)
-        rest += GROUND_ROUNDOFF * float(size.max(initial=0.0))
+        rest += GROUND_ROUNDOFF * float(_MAX.reduce(size))     # size.max() without its Python wrapper
         # int_0^s_k |g_grid|: on each interval at most the mean of its ends' sizes (exact where g
         # keeps its sign), times dS
         integral = np.zeros(GRID + 1)
-        np.cumsum((0.5 * self.H / GRID) * (size[:-1] + size[1:]), out=integral[1:])
+        pieces = size[:-1] + size[1:]
+        pieces *= 0.5 * self.H / GRID
+        _SUM_UP(pieces, out=integral[1:])
         return g, rest, integral
 
 
@@ -1485,7 +1489,7 @@ class OpenGaps:
                         peak = ground.peak()
                     else:
                         bound = ground() if callable(ground) else ground
-                        peak = float(bound.max())
+                        peak = float(_MAX.reduce(bound))
                 if pair.open_throughout(y, H, peak, forces):
                     for pos in pair.positions:  # what the proof on the grid would answer
                         out[pos] = H
