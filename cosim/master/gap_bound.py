@@ -472,16 +472,20 @@ def _as_slice(index: np.ndarray):
     return index
 
 
-def _answer(upper: np.ndarray, now: np.ndarray, positions, out: list, dS: float, H: float, limit: float) -> None:
+def _answer(upper: np.ndarray, now: np.ndarray, positions, out: list, dS: float, H: float, limit: float,
+            closed: float | None = None) -> None:
     """Each level's horizon into ``out`` at its position from its grid intervals' upper bounds
     ``upper`` (levels x intervals) and its penetration ``now`` (m): up to its first interval that
-    may close, else ``H``, at most ``limit`` (s); a gap closed now is left as it is (0)."""
+    may close, else ``H``, at most ``limit`` (s); a gap closed now gets ``closed`` (None: left as
+    it is, the caller's 0)."""
     bad = upper >= 0.0
     first = bad.argmax(axis=1).tolist()
     hit = _ANY(bad, axis=1).tolist()
     for pos, c, f, h in zip(positions, (now >= 0.0).tolist(), first, hit):
         if not c:
             out[pos] = min(limit, float(f) * dS if h else H)
+        elif closed is not None:
+            out[pos] = closed
 
 
 #: horizons whose stacked tables a pair keeps (a run's proofs use a few: the dyadic steps' nominal
@@ -783,7 +787,7 @@ class _ExactPair(_LinearPair):
         upper += residual_rows[:m] * rest[1:]
         upper += residual_rows[m:] * rest[1:]
         upper += EXACT_MARGIN
-        _answer(upper, delta[:, 0], self.positions, out, dS, H, H)
+        _answer(upper, delta[:, 0], self.positions, out, dS, H, H, closed=0.0)
 
 
 class _BilinearPair:
