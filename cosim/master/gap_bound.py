@@ -116,6 +116,11 @@ BOUC_WEN_Z_MARGIN = 1e-4
 #: interval, ~1e-13 m; the FMU's own to ~1e-15 of the displacements), far below it, and it is
 #: far below any gap
 EXACT_MARGIN = 1e-9
+#: absolute slack (m) below zero that the coarse bound of a level's penetration over a whole horizon
+#: (:meth:`_LinearPair.open_throughout`) must keep before the proof on the grid is skipped: that
+#: proof's bound lies under the coarse one in exact arithmetic, and their round-off (~1e-15 of the
+#: floors' displacements, ~1e-16 m) is far below this
+COARSE_MARGIN = 1e-9
 #: linear buildings' proofs compute the ground's response (:class:`_ExactPair`) where the ground
 #: motion ahead is known (:class:`GroundAhead`) and every mode has stiffness
 EXACT_GROUND = True
@@ -134,6 +139,8 @@ _ZERO = np.zeros(1)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
+#: ``np.cumsum`` of a vector without its Python wrapper
+_SUM_UP = np.add.accumulate
 try:    # np.interp's compiled core, without its Python wrapper (which only dispatches on complex values)
     from numpy._core.multiarray import interp as _interp
 except ImportError:     # pragma: no cover - numpy < 2
@@ -402,7 +409,7 @@ class FloorMotion:
             self._rows, self._abs_rows, self._rows_ground = bound.phi, bound.abs_phi, cached[4]
         else:
             self._rows, self._abs_rows, self._rows_ground = bound.rows, bound.abs_rows, cached[5]
-        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and force.any() else None
+        self.modal_force = np.abs(bound.phi.T @ force) if force is not None and _ANY(force) else None
         # a yielding building's storey forces (ModalBound.through_yielding), on the floors only
         self._plastic = cached[6] if shift is None else None
         self._all = self._floors = None
@@ -465,6 +472,41 @@ def _as_slice(index: np.ndarray):
     return index
 
 
+def _answer(upper: np.ndarray, now: np.ndarray, positions, out: list, dS: float, H: float, limit: float,
+            closed: float | None = None) -> None:
+    """Each level's horizon into ``out`` at its position from its grid intervals' upper bounds
+    ``upper`` (levels x intervals) and its penetration ``now`` (m): up to its first interval that
+    may close, else ``H``, at most ``limit`` (s); a gap closed now gets ``closed`` (None: left as
+    it is, the caller's 0)."""
+    bad = upper >= 0.0
+    first = bad.argmax(axis=1).tolist()
+    hit = _ANY(bad, axis=1).tolist()
+    for pos, c, f, h in zip(positions, (now >= 0.0).tolist(), first, hit):
+        if not c:
+            out[pos] = min(limit, float(f) * dS if h else H)
+        elif closed is not None:
+            out[pos] = closed
+
+
+#: horizons whose stacked tables a pair keeps (a run's proofs use a few: the dyadic steps' nominal
+#: lengths and the quiet proofs' reach)
+_HORIZONS_KEPT = 64
+
+
+def _stacked_tables(cache: dict, key, bounds, parts) -> tuple:
+    """``cache[key]``: the tables of two buildings' :meth:`ModalBound._cached` at a horizon stacked,
+    left rows then right, one array per part; made the first time (the horizon is ``key``, or its
+    last element) and kept while the cache holds at most :data:`_HORIZONS_KEPT` (the oldest goes).
+    ``parts`` takes both buildings' cached tuples and returns the pairs of arrays to stack."""
+    tables = cache.get(key)
+    if tables is None:
+        if len(cache) > _HORIZONS_KEPT:
+            cache.pop(next(iter(cache)))
+        H = key[-1] if isinstance(key, tuple) else key
+        tables = cache[key] = tuple(np.vstack(pair) for pair in parts(*(b._cached(H) for b in bounds)))
+    return tables
+
+
 class _LinearPair:
     """The levels between two linear buildings, proven as :meth:`OpenGaps.horizons` does with
     fewer numpy calls (each ~1 us: their count is a proof's cost), bit for bit:
@@ -495,6 +537,14 @@ class _LinearPair:
         self.m = m
         # the levels' floors in the stacked rows: views where they are evenly spaced (no copy)
         self.rows_l, self.rows_r = _as_slice(fl), _as_slice(bl.n + fr)
+        self._fr_own = _as_slice(fr)    # the right floors in the right building's own reads
+        # each level's gain of the coarse bound (open_throughout) per unit of |ag|: sum_j |Phi_fj
+        # Gamma_j| of both floors, the forced bound's weights on G_j(s) <= s^2 / 2
+        self._coarse_ground = (bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]
+        # and its weights on each mode's free rate bound A_j for the free acceleration:
+        # |q_j''| = |c_j q_j' + w_j (w_j q_j)| <= sqrt(c_j^2 + w_j^2) A_j, c_j = 2 zeta_j w_j
+        self._coarse_accel = tuple(b.abs_phi[f] * np.sqrt(b.w * b.w + 4.0 * b.zeta_w * b.zeta_w)
+                                   for b, f in ((bl, fl), (br, fr)))
         # buffers every proof writes into, and the views of them it reads (made once: a view
         # costs about as much as a small numpy operation)
         nl, nr2 = self.nl, 2 * self.nl
@@ -522,14 +572,10 @@ class _LinearPair:
         self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
-        tables = self._by_h.get(H)
-        if tables is None:
-            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
-                self._by_h.pop(next(iter(self._by_h)))
-            cl, cr = (b._cached(H) for b in self.bounds)
-            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
-                                      np.vstack((cl[4][self.fl, 1:], cr[4][self.fr, 1:])))
-        return tables
+        """``(Ac, As, ground rows of the levels' floors)`` of both buildings, stacked."""
+        fl, fr = self.fl, self.fr
+        return self._by_h.get(H) or _stacked_tables(self._by_h, H, self.bounds, lambda cl, cr: (
+            (cl[1], cr[1]), (cl[2], cr[2]), (cl[4][fl, 1:], cr[4][fr, 1:])))
 
     def _state(self, y: np.ndarray) -> None:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
@@ -588,6 +634,50 @@ class _LinearPair:
             self._free[H] = free
         return free
 
+    def open_throughout(self, y: np.ndarray, H: float, peak: float, forces: dict) -> bool:
+        """True when every level's gap provably stays open over all of ``[0, H]`` (s) by the coarse
+        bound (:meth:`coarse_bound`) with :data:`COARSE_MARGIN` to spare: :meth:`prove` then answers
+        ``H`` for every level, and need not be made."""
+        return bool(_ALL(self.coarse_bound(y, H, peak, forces) < -COARSE_MARGIN))
+
+    def coarse_bound(self, y: np.ndarray, H: float, peak: float, forces: dict) -> np.ndarray:
+        """Each level's penetration over ``[0, H]`` (s) is at most this (m), and :meth:`prove`'s
+        bound on every grid interval too.  It costs the modal state (which :meth:`prove` keeps)
+        and a few operations on the levels, no motion on the grid.
+
+        The free part ``d(s)`` of the penetration starts at ``d0 = x_l - x_r - gap`` with the rate
+        ``v0 = v_l - v_r`` and an acceleration of at most ``a = sum_j |Phi_fj| sqrt(c_j^2 + w_j^2)
+        A_j`` over both floors (``q'' = -(c q' + w (w q))``, ``A_j = sqrt(w_j^2 q_j^2 + q_j'^2)``
+        never grows), so on every grid interval the mean of its ends is at most the largest of
+        the convex ``d0 + v0 s + a s^2 / 2``, which is at ``s = 0`` or ``s = H``.  :meth:`prove`
+        adds ``R dS / 2`` (the same term) and the forced part, each mode's ``G_j(s) <= s^2 / 2``
+        times its load: at most ``P H^2 / 2``, ``P = sum_j |Phi_fj| (|Gamma_j| peak + |phi_j' F|)``
+        with ``peak`` (m/s^2) at least ``|ag|`` over the horizon.  So in exact arithmetic its
+        bound on every interval lies under ``max(d0, d0 + v0 H + a H^2 / 2) + R dS / 2 + P H^2 / 2``."""
+        self._state(y)
+        u_l, v_l, u_r, v_r = self._reads_parts
+        rows_l, rows_r = self.rows_l, self._fr_own
+        d0 = u_l[rows_l] - u_r[rows_r]
+        d0 -= self.gap[:, 0]
+        speed_l, speed_r = self._speed_parts
+        accel_l, accel_r = self._coarse_accel
+        free = accel_l @ speed_l
+        free += accel_r @ speed_r
+        free *= 0.5 * H * H
+        free += (v_l[rows_l] - v_r[rows_r]) * H
+        free += d0
+        bound = _MAX(d0, free, out=free)
+        bound += self._half_rate[:, 0] * (H / GRID)
+        load = self._coarse_ground * peak
+        if forces:
+            for name, modes, floors in ((self.left, self.bounds[0], self.fl), (self.right, self.bounds[1], self.fr)):
+                force = forces.get(name)
+                if force is not None and _ANY(force):
+                    load += modes.abs_phi[floors] @ np.abs(modes.phi.T @ force)
+        load *= 0.5 * H * H
+        bound += load
+        return bound
+
     def prove(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, out: list) -> None:
         """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
         self._state(y)
@@ -615,7 +705,7 @@ class _LinearPair:
             for name, bound, floors, part in ((self.left, self.bounds[0], self.fl, forced_l),
                                               (self.right, self.bounds[1], self.fr, forced_r)):
                 force = forces.get(name)
-                if force is not None and force.any():
+                if force is not None and _ANY(force):
                     part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
         upper += forced_l
         upper += forced_r
@@ -683,7 +773,7 @@ class _ExactPair(_LinearPair):
             s = _grid(H)
             for name, bound, floors, sign in ((self.left, bl, self.fl, 1.0), (self.right, br, self.fr, -1.0)):
                 force = forces.get(name)
-                if force is None or not force.any():
+                if force is None or not _ANY(force):
                     continue
                 load = bound.phi.T @ force                       # modal load (held)
                 step = bound.step_response(H)                     # modes x points
@@ -697,12 +787,7 @@ class _ExactPair(_LinearPair):
         upper += residual_rows[:m] * rest[1:]
         upper += residual_rows[m:] * rest[1:]
         upper += EXACT_MARGIN
-        closed = (delta[:, 0] >= 0.0).tolist()
-        bad = upper >= 0.0
-        first = bad.argmax(axis=1).tolist()
-        hit = _ANY(bad, axis=1).tolist()
-        for pos, c, f, h in zip(self.positions, closed, first, hit):
-            out[pos] = 0.0 if c else (float(f) * dS if h else H)
+        _answer(upper, delta[:, 0], self.positions, out, dS, H, H, closed=0.0)
 
 
 class _BilinearPair:
@@ -756,25 +841,15 @@ class _BilinearPair:
         self._row_kernels: dict = {}    # H -> every row's ground kernel, both buildings stacked
 
     def _tables(self, H: float) -> tuple:
-        tables = self._by_h.get(H)
-        if tables is None:
-            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
-                self._by_h.pop(next(iter(self._by_h)))
-            cl, cr = (b._cached(H) for b in self.bounds)
-            tables = self._by_h[H] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
-                                      np.vstack((cl[5], cr[5])))
-        return tables
+        """``(Ac, As, ground rows of every floor and storey drift)`` of both buildings, stacked."""
+        return self._by_h.get(H) or _stacked_tables(self._by_h, H, self.bounds, lambda cl, cr: ((cl[1], cr[1]), (cl[2], cr[2]),
+                                                                          (cl[5], cr[5])))
 
     def _yielded_tables(self, H: float) -> tuple:
-        key = ("yielded", H)
-        tables = self._by_h.get(key)
-        if tables is None:
-            if len(self._by_h) > 64:        # a bounded number of distinct step lengths
-                self._by_h.pop(next(iter(self._by_h)))
-            cl, cr = (b._cached(H) for b in self.yielded)
-            tables = self._by_h[key] = (np.vstack((cl[1], cr[1])), np.vstack((cl[2], cr[2])),
-                                        np.vstack((cl[4], cr[4])), np.vstack((cl[6], cr[6])))
-        return tables
+        """``(Ac, As, floors' ground bound, floors' storey-force bound)`` of both bounds through
+        yielding, stacked."""
+        return self._by_h.get(("yielded", H)) or _stacked_tables(self._by_h, ("yielded", H), self.yielded, lambda cl, cr: (
+            (cl[1], cr[1]), (cl[2], cr[2]), (cl[4], cr[4]), (cl[6], cr[6])))
 
     def _read(self, y: np.ndarray) -> None:
         """The state from the reads (:meth:`OpenGaps._state` of both buildings, stacked)."""
@@ -785,8 +860,8 @@ class _BilinearPair:
         n, nl = self.n, self.nl
         u, v, r = reads[:n], reads[n:2 * n], reads[2 * n:]
         shift = np.empty(n)
-        np.cumsum(r[:nl], out=shift[:nl])               # ElasticRange.shift_of, per building
-        np.cumsum(r[nl:], out=shift[nl:])
+        _SUM_UP(r[:nl], out=shift[:nl])                 # ElasticRange.shift_of (a cumsum), per building
+        _SUM_UP(r[nl:], out=shift[nl:])
         centre = self.centre_factor * r
         w = u - shift
         # ElasticRange.yielding: d = D w - centre, |d| >= the limit (D w's first storey is w_0 - 0.0 = w_0)
@@ -938,13 +1013,7 @@ class _BilinearPair:
             upper += forced[Fr, 1:]
             if exact:
                 upper += EXACT_MARGIN
-            bad = upper >= 0.0
-            first = bad.argmax(axis=1).tolist()
-            hit = _ANY(bad, axis=1).tolist()
-            closed = (delta[:, 0] >= 0.0).tolist()
-            for pos, c, f, h in zip(positions, closed, first, hit):
-                if not c:
-                    out[pos] = min(s, float(f) * dS if h else H)
+            _answer(upper, delta[:, 0], positions, out, dS, H, s)
         short = [i for i, pos in enumerate(positions) if out[pos] < H]
         if not short:
             return
@@ -1110,6 +1179,15 @@ class GroundAhead:
     def __call__(self) -> np.ndarray:
         return running_max_abs(self.times, self.values, self.t0, self.H)
 
+    def peak(self) -> float:
+        """A bound on ``|ag|`` over the whole horizon (m/s^2): the largest ``|value|`` of the knots
+        from the last at or before ``t0`` to the first at or after ``t0 + H`` (the polyline
+        between two knots lies between their values)."""
+        times = self.times
+        lo = max(int(times.searchsorted(self.t0, "right")) - 1, 0)
+        hi = int(times.searchsorted(self.t0 + self.H, "left")) + 1
+        return float(_MAX.reduce(np.abs(self.values[lo:hi])))
+
     def on_grid(self) -> tuple[np.ndarray, np.ndarray]:
         """``(g, rest, integral)``: the ground acceleration at the grid points ``t0 + s_k``
         (m/s^2), ``max |ag - g_grid|`` over ``[t0, t0 + s_k]`` (m/s^2), ``g_grid`` the polyline
@@ -1131,11 +1209,13 @@ class GroundAhead:
         else:
             rest = np.zeros(GRID + 1)
         size = np.abs(g)
-        rest += GROUND_ROUNDOFF * float(size.max(initial=0.0))
+        rest += GROUND_ROUNDOFF * float(_MAX.reduce(size))     # size.max() without its Python wrapper
         # int_0^s_k |g_grid|: on each interval at most the mean of its ends' sizes (exact where g
         # keeps its sign), times dS
         integral = np.zeros(GRID + 1)
-        np.cumsum((0.5 * self.H / GRID) * (size[:-1] + size[1:]), out=integral[1:])
+        pieces = size[:-1] + size[1:]
+        pieces *= 0.5 * self.H / GRID
+        _SUM_UP(pieces, out=integral[1:])
         return g, rest, integral
 
 
@@ -1347,13 +1427,7 @@ class OpenGaps:
                 upper += (0.5 * (ll[fl] + lr[fr]) * dS)[:, None]
                 upper += bl[fl, 1:]
                 upper += br[fr, 1:]
-                bad = upper >= 0.0
-                first = bad.argmax(axis=1).tolist()
-                hit = _ANY(bad, axis=1).tolist()
-                closed = (delta[:, 0] >= 0.0).tolist()
-                for pos, c, f, h in zip(positions, closed, first, hit):
-                    if not c:
-                        out[pos] = min(s, float(f) * dS if h else H)
+                _answer(upper, delta[:, 0], positions, out, dS, H, s)
             if yielded and (left in yielded or right in yielded):
                 short = [i for i, pos in enumerate(positions) if out[pos] < H]
                 if short:
@@ -1403,11 +1477,27 @@ class OpenGaps:
         exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
         plan = self._linear_plan(which, exact)
         out = [0.0] * sum(len(p.positions) for p in plan)
-        bound = None
+        bound = peak = None
+        # the coarse bound (_LinearPair.open_throughout) is tried on the levels of sleeping contacts
+        # while others are awake (a proper subset): those lie away from the contacts and mostly pass
+        # (kasai_maison: 144 of 190); with every level asked for, a gap is about to close and the
+        # coarse bound mostly fails (33 of 34), which then costs a third of a proof more
+        coarse = which is not None and len(which) < len(self.levels)
         for pair in plan:
             if isinstance(pair, _ExactPair):
                 pair.prove(y, H, ground, forces, out)
                 continue
+            if coarse:
+                if peak is None:        # the coarse bound needs only the ground's peak over the horizon
+                    if isinstance(ground, GroundAhead):
+                        peak = ground.peak()
+                    else:
+                        bound = ground() if callable(ground) else ground
+                        peak = float(_MAX.reduce(bound))
+                if pair.open_throughout(y, H, peak, forces):
+                    for pos in pair.positions:  # what the proof on the grid would answer
+                        out[pos] = H
+                    continue
             if bound is None:
                 bound = ground() if callable(ground) else ground
             pair.prove(y, H, bound, forces, out)
