@@ -283,6 +283,8 @@ class Building(Fmi2Slave):
         with np.errstate(divide="ignore"):
             self._inv_yield_drift = np.where(fy > 0.0, building.stiffnesses / np.where(fy > 0.0, fy, 1.0), 0.0)
         self._y = np.zeros(3 * n + 1)  # work buffer [u; v; ag; f]
+        # where _linear_step's energy product splits: y' Q y, f' du, |sqrt(m) v1|^2, |sqrt(k) d1|^2
+        self._energy_sections = np.array([0, 3 * n + 1, 4 * n + 1, 5 * n + 1])
         self._derived_block = np.zeros((len(_DERIVED), N_MAX))
         self._derived_rows = dict(zip(_DERIVED, self._derived_block))
         # Absolute acceleration = R z + f / m with z = [u; v].
@@ -374,11 +376,13 @@ class Building(Fmi2Slave):
         self._stepped_lengths = lengths | {key}
 
     def _step_matrix(self, h: float, asked: float | None = None):
-        """``G`` with ``G @ y`` = [u1; v1; a1; drift1; du; m' du; Q y; sqrt(m) v1; sqrt(k) drift1],
-        and the matrices of the in-step peak search (``ExactPiecewiseLinear.legacy_rows``).
+        """``G`` with ``G @ y`` = [u1; v1; a1; drift1; m' du; Q y; du; sqrt(m) v1; sqrt(k) drift1;
+        start rows], and the matrices of the in-step peak search (``ExactPiecewiseLinear.legacy_rows``,
+        whose ``start`` rows are the last rows of ``G``).
 
         ``y = [u0; v0; ag; f]``; ``Q`` is the exact damping-energy form (``E_damping = y' Q y``).
-        Everything a step needs is one matrix-vector product and three dot products.  The step
+        Everything a step needs is one matrix-vector product and one elementwise product whose
+        four partial sums are the energies (:meth:`_linear_step`).  The step
         matrix and ``Q`` from the building's modes in closed form (``ModalZohPropagator``: no
         matrix exponential per new step length); a free mass (no oscillating mode) keeps the
         block exponential (``ZohPropagator``), bit for bit as before.
@@ -400,7 +404,7 @@ class Building(Fmi2Slave):
             accel[:, 2 * n + 1:] += np.diag(1.0 / b.masses)
             D = np.eye(n) - np.eye(n, k=-1)            # drift = D u
             du = Su - np.eye(n, 3 * n + 1)
-            G = np.vstack([S, accel, D @ Su, du, b.masses @ du, prop.damping_form,
+            G = np.vstack([S, accel, D @ Su, b.masses @ du, prop.damping_form, du,
                            np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
         if not np.isfinite(G).all():
             # the block exponential (and Van Loan's damping integral, which grows like
@@ -409,7 +413,11 @@ class Building(Fmi2Slave):
             raise SlaveError(f"a step of h = {asked!r} s is beyond what the building's arithmetic supports (its step "
                              f"matrix overflows; fastest mode {fastest:.3g} rad/s, zeta = {b.damping_ratio:g}); "
                              f"use a shorter step")
-        peaks = None if self._free_mass else self._integrator.legacy_rows(h, S)
+        peaks = None
+        if not self._free_mass:
+            start, scan, reach = self._integrator.legacy_rows(h, S)
+            G = np.vstack([G, start])            # the peak search's start values: rows of the same product
+            peaks = (scan, reach)
         if len(self._steps) >= _MAX_CACHED_STEPS:
             self._steps.pop(next(iter(self._steps)))
         entry = self._steps[h] = (np.ascontiguousarray(G), peaks, h)
@@ -497,8 +505,8 @@ class Building(Fmi2Slave):
         total.rhs_evaluations += cost.rhs_evaluations
 
     def _linear_step(self, step_size: float, entry) -> None:
-        """The linear zero-order-hold step: one cached matrix (:meth:`_zoh_entry`), bit for bit as
-        in earlier versions."""
+        """The linear zero-order-hold step: one product with a cached matrix (:meth:`_zoh_entry`)
+        gives the end state, the outputs, the energies' factors and the peak search's start values."""
         G, peaks, _ = entry
         n = self._n
         ag = self.ag
@@ -514,14 +522,17 @@ class Building(Fmi2Slave):
         y[2 * n] = ag
         y[2 * n + 1:] = f
         w = G @ y
+        # rows (_step_matrix): [u1; v1; a1; drift1; m' du; Q y; du; sqrt(m) v1; sqrt(k) drift1; start]
         i = 4 * n
-        j = i + n + 1
-        k = j + 3 * n + 1
-        d_external = float(f @ w[i:i + n])
-        d_input = -ag * float(w[i + n])
-        d_damping = float(y @ w[j:k])
-        kinetic = 0.5 * float(w[k:k + n] @ w[k:k + n])
-        strain = 0.5 * float(w[k + n:] @ w[k + n:])
+        j = i + 1
+        k = j + 4 * n + 1
+        # the energies as partial sums of one elementwise product: y' Q y, f' du and twice the
+        # kinetic and strain energies (sums of squares)
+        d_damping, d_external, kinetic, strain = np.add.reduceat(
+            w[j:k + 2 * n] * np.concatenate((y, f, w[k:k + 2 * n])), self._energy_sections).tolist()
+        d_input = -ag * float(w[i])
+        kinetic *= 0.5
+        strain *= 0.5
         # a non-finite displacement or velocity makes one of these non-finite (each is a sum of
         # squares or products of them): refuse before anything changes
         if not math.isfinite(kinetic + strain + d_damping + d_input + d_external):
@@ -531,8 +542,8 @@ class Building(Fmi2Slave):
         if peaks is None:
             self._free_mass_peaks(ag, f[0], step_size)
         else:
-            start, scan, change = peaks
-            self._integrator.legacy_peaks(state, y, start @ y, scan, change, step_size, self.cost)
+            scan, reach = peaks
+            self._integrator.legacy_peaks(state, y, w[k + 2 * n:], scan, reach, step_size, self.cost)
         state.u = w[:n]           # views of the fresh product: nothing else writes to w
         state.v = w[n:2 * n]
         state.E_external += d_external
