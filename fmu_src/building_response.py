@@ -67,7 +67,7 @@ from scipy.optimize import brentq
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
 from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
-                              canonical_length, first_root, hermite_range, hermite_range_scalar, max_abs)
+                              canonical_length, first_root, hermite_range_scalar, hermite_ranges, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -803,18 +803,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         rows, cols = keep.nonzero()                           # interval by interval, functions ascending
         if rows.size:
             # the tests _peaks runs on each candidate, on all of them at once: the same IEEE
-            # operations (hermite_range is hermite_range_scalar element by element), so the same
+            # operations (hermite_ranges is hermite_range_scalar element by element), so the same
             # decisions and the same deferred bounds.  A candidate with a slope of one sign whose
             # slope's Hermite range keeps that sign (within its bound) has its extremes at the ends
             # (the cheaper bound of that test failed for every candidate: `monotonic` above)
             s0c, s1c = G[rows, 2, cols], G[rows, 3, cols]
             err = bound5[rows, cols] * w4
-            slo, shi = hermite_range(s0c, s1c, length * G[rows, 4, cols], length * G[rows, 5, cols])
+            slo, shi = hermite_ranges(s0c, s1c, length * G[rows, 4, cols], length * G[rows, 5, cols])
             sign_kept = (s0c * s1c > 0.0) & ((slo - err > 0.0) | (shi + err < 0.0))
             ends = G[rows, 1, cols]
             accel = cols >= two_n
             ends[accel] += accel_offset[cols[accel] - two_n]           # as _peaks' g1 (no 0.0 added elsewhere)
-            lo, hi = hermite_range(G[rows, 0, cols] + offset[cols], ends, length * s0c, length * s1c)
+            lo, hi = hermite_ranges(G[rows, 0, cols] + offset[cols], ends, length * s0c, length * s1c)
             bound = np.maximum(-lo, hi) + bound4[rows, cols] * w4
             deferred = ~sign_kept & ~(bound <= limits[rows, cols])
             rows, cols, bound = rows[deferred].tolist(), cols[deferred].tolist(), bound[deferred].tolist()
@@ -1419,12 +1419,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
         # (only the candidates' rows: most segments leave a few of the 3n functions)
-        # (one gather of the candidates' numbers: G's six columns, B's two, g(L) with its
-        # offset, the limit)
-        table = np.column_stack((G, B, g1, limits))[candidates].tolist()
+        # (rows gathered apart: np.column_stack cost more than the tests of a few candidates)
+        ends, limit_list = g1.tolist(), limits.tolist()
         offsets = accel_offset.tolist()
         deferred = []
-        for j, (g0, _, s0, s1, c0, c1, bound0, bound1, end, limit) in zip(candidates, table):
+        for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, G[candidates].tolist(),
+                                                               B[candidates].tolist()):
+            end, limit = ends[j], limit_list[j]
             if j >= 2 * n:
                 g0 = g0 + offsets[j - 2 * n]
             else:

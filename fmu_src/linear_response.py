@@ -164,6 +164,25 @@ def hermite_range(g0, g1, d0, d1):
     return lo, hi
 
 
+# below this many elements hermite_ranges goes element by element (measured: 2 us against 26 us for
+# 2 elements, 18 against 29 for 32, 36 against 30 for 64)
+HERMITE_VECTOR_FROM = 40
+
+
+def hermite_ranges(g0: np.ndarray, g1: np.ndarray, d0: np.ndarray, d1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`hermite_range` of 1-d arrays, by :func:`hermite_range_scalar` element by element
+    below ``HERMITE_VECTOR_FROM`` elements: the same floats (the same IEEE operations), without the
+    fifty numpy calls' overhead on a few elements."""
+    if g0.size >= HERMITE_VECTOR_FROM:
+        return hermite_range(g0, g1, d0, d1)
+    lo, hi = [], []
+    for a, b, c, d in zip(g0.tolist(), g1.tolist(), d0.tolist(), d1.tolist()):
+        low, high = hermite_range_scalar(a, b, c, d)
+        lo.append(low)
+        hi.append(high)
+    return np.array(lo, dtype=float), np.array(hi, dtype=float)
+
+
 def hermite_range_scalar(g0: float, g1: float, d0: float, d1: float) -> tuple[float, float]:
     """:func:`hermite_range` for floats (the bisection searches call it many times).
 

@@ -284,3 +284,22 @@ def test_scalar_hermite_range_is_the_vectorised_one_and_brackets_the_cubic():
         # |H''| <= 6 |g0 - g1| + 4 |d0| + 4 |d1| on [0, 1]
         slack = 3.2e-10 * (6.0 * abs(g0 - g1) + 4.0 * abs(d0) + 4.0 * abs(d1)) + scale
         assert samples.min() <= lo + slack and samples.max() >= hi - slack
+
+
+def test_hermite_ranges_is_hermite_range_below_and_above_its_threshold():
+    """hermite_ranges (element by element below HERMITE_VECTOR_FROM, for the in-step peak tests of
+    _interval_peaks) gives hermite_range's floats exactly on both sides of its threshold, ties,
+    zero slopes and vanishing cubic terms included: a branch taken differently fails."""
+    from fmu_src.linear_response import HERMITE_VECTOR_FROM, hermite_range, hermite_ranges
+    rng = np.random.default_rng(17)
+    special = np.array([0.0, 1.0, -1.0, 2.0, 0.5])
+    for size in (1, 2, 7, HERMITE_VECTOR_FROM - 1, HERMITE_VECTOR_FROM, 3 * HERMITE_VECTOR_FROM):
+        for trial in range(200):
+            args = [rng.normal(size=size) * 10.0 ** rng.integers(-6, 7, size=size) for _ in range(4)]
+            if trial % 3 == 0:
+                for a in args:
+                    a[::2] = rng.choice(special, size=a[::2].size)
+            lo, hi = hermite_ranges(*args)
+            vlo, vhi = hermite_range(*args)
+            assert lo.dtype == vlo.dtype and lo.shape == vlo.shape == (size,)
+            assert np.array_equal(lo, vlo) and np.array_equal(hi, vhi), (size, trial)
