@@ -743,7 +743,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         e_damp, e_in = (forms @ (Y.T @ Y).ravel()).tolist()
         cost = StepCost()
         cost.segments = count
-        if need.any():
+        if np.count_nonzero(need):
             rows = need.any(axis=1).nonzero()[0].tolist()
             cost.cleared = count - len(rows)
             Yr = Y[rows]
@@ -1534,7 +1534,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         ``[u0; v0; ag; f]``, ``start_values = start @ y_zoh`` of :meth:`legacy_rows`);
         ``state`` still holds the start of the step."""
         flags = reach @ np.abs(start_values) > state.peaks    # strict, see _interval
-        if not flags.any():
+        if not np.count_nonzero(flags):      # (cheaper than flags.any() on a few elements)
             cost.cleared += 1
             return
         n = self.n

@@ -283,6 +283,7 @@ class Building(Fmi2Slave):
         with np.errstate(divide="ignore"):
             self._inv_yield_drift = np.where(fy > 0.0, building.stiffnesses / np.where(fy > 0.0, fy, 1.0), 0.0)
         self._y = np.zeros(3 * n + 1)  # work buffer [u; v; ag; f]
+        self._k1 = float(building.stiffnesses[0])       # N/m, the base shear's stiffness
         # where _linear_step's energy product splits: y' Q y, f' du, |sqrt(m) v1|^2, |sqrt(k) d1|^2
         self._energy_sections = np.array([0, 3 * n + 1, 4 * n + 1, 5 * n + 1])
         self._derived_block = np.zeros((len(_DERIVED), N_MAX))
@@ -441,8 +442,9 @@ class Building(Fmi2Slave):
             unmapped = True      # the first step of its length: no matrices built (_zoh_entry)
         n = self._n
         f = self.F[:n]
-        # one reduction instead of a per-element test; a sum that is not finite is looked at closely
-        finite = math.isfinite(f.sum()) or bool(np.isfinite(f).all())
+        # one sum (of Python floats: cheaper than numpy's for a few) instead of a per-element test;
+        # a sum that is not finite is looked at closely
+        finite = math.isfinite(sum(f.tolist())) or bool(np.isfinite(f).all())
         if knots is None:
             ag = float(self.ag)
             if not (math.isfinite(ag) and finite):
@@ -511,9 +513,9 @@ class Building(Fmi2Slave):
         n = self._n
         ag = self.ag
         f = self.F[:n]
-        # one reduction instead of a per-element test; a sum that overflows is looked at closely
-        if not (math.isfinite(ag) and math.isfinite(f.sum())) and not (
-                math.isfinite(ag) and np.isfinite(f).all()):
+        # one sum of Python floats (cheaper than numpy's on a few) instead of a per-element test;
+        # a sum that is not finite (an overflow too) is looked at closely
+        if not math.isfinite(ag + sum(f.tolist())) and not (math.isfinite(ag) and np.isfinite(f).all()):
             raise SlaveError(self._non_finite_input(ag, f))
         state = self._state
         y = self._y
@@ -560,7 +562,7 @@ class Building(Fmi2Slave):
         self.v[:n] = w[n:2 * n]
         self.a[:n] = w[2 * n:3 * n]
         self.drift[:n] = w[3 * n:4 * n]
-        self.base_shear = float(self._building.stiffnesses[0] * w[0])
+        self.base_shear = self._k1 * float(w[0])
         self.E_external = state.E_external
         self.E_input = state.E_input
         self.E_damping = state.E_damping
