@@ -415,6 +415,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._ramps: dict[float, RampStep] = {}
         self._ramp_aliases: dict[float, RampStep] = {}
         self._ramp_y = np.zeros(3 * n + 2)     # work buffer [u0; v0; ag0; ag1; p]
+        self._legacy_parts = None              # legacy_rows' constant rows, made at its first call
 
     # -- bilinear storey state -----------------------------------------------------------------
     def _law_facts(self, mode: np.ndarray):
@@ -1512,6 +1513,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         step matrix, the change bound in closed form."""
         cfg = self.configuration(np.zeros(self.n, dtype=np.int64))
         n = self.n
+        if self._legacy_parts is None:
+            # what does not depend on h, made once: the watched functions' rows at the start (the
+            # accelerations with f / m) and the identity of reach's value-at-start columns
+            watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
+            watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)
+            self._legacy_parts = (np.ascontiguousarray(watch[:3 * n]), np.eye(3 * n))
+        watch, identity = self._legacy_parts
         drop = 2 * n + 1     # the ag1 column: a zero-order hold has no ramp (any value there is dropped)
         # np.insert / np.delete of that column, as plain copies (a fifth of the cost of a new length)
         state_map = np.zeros((step_matrix.shape[0], step_matrix.shape[1] + 1))
@@ -1522,11 +1530,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         scan[:, :drop] = full[:, :drop]
         scan[:, drop:] = full[:, drop + 1:]
         change, _ = cfg.change_bounds(h)
-        watch = np.hstack([cfg.watch_rows, np.zeros((4 * n, n + 1))])
-        watch[2 * n:3 * n, 2 * n + 1:] = np.diag(1.0 / self.masses)
-        start = np.ascontiguousarray(np.vstack([scan[-4 * n:], watch[:3 * n]]))
-        reach = np.ascontiguousarray(np.hstack([change[:3 * n], np.eye(3 * n)]))
-        return start, np.ascontiguousarray(scan), reach
+        start = np.concatenate((scan[-4 * n:], watch))
+        reach = np.concatenate((change[:3 * n], identity), axis=1)
+        return start, scan, reach
 
     def legacy_peaks(self, state, y_zoh: np.ndarray, start_values: np.ndarray, scan_rows: np.ndarray,
                      reach: np.ndarray, h: float, cost: StepCost) -> None:

@@ -284,6 +284,10 @@ class Building(Fmi2Slave):
             self._inv_yield_drift = np.where(fy > 0.0, building.stiffnesses / np.where(fy > 0.0, fy, 1.0), 0.0)
         self._y = np.zeros(3 * n + 1)  # work buffer [u; v; ag; f]
         self._k1 = float(building.stiffnesses[0])       # N/m, the base shear's stiffness
+        # what _step_matrix needs that does not depend on h: diag(1 / m), the drift rows D, the
+        # rows picking u0 out of y, sqrt(m) and sqrt(k) as columns
+        self._zoh_parts = (np.diag(1.0 / building.masses), np.eye(n) - np.eye(n, k=-1), np.eye(n, 3 * n + 1),
+                           np.sqrt(building.masses)[:, None], np.sqrt(building.stiffnesses)[:, None])
         # where _linear_step's energy product splits: y' Q y, f' du, |sqrt(m) v1|^2, |sqrt(k) d1|^2
         self._energy_sections = np.array([0, 3 * n + 1, 4 * n + 1, 5 * n + 1])
         self._derived_block = np.zeros((len(_DERIVED), N_MAX))
@@ -401,12 +405,13 @@ class Building(Fmi2Slave):
                                      f"({exc}); use a shorter step") from None
             S = prop.step_matrix                       # [u1; v1] = S y
             Su = S[:n]
+            inv_m, D, u0_rows, sqrt_m, sqrt_k = self._zoh_parts
             accel = self._R @ S
-            accel[:, 2 * n + 1:] += np.diag(1.0 / b.masses)
-            D = np.eye(n) - np.eye(n, k=-1)            # drift = D u
-            du = Su - np.eye(n, 3 * n + 1)
-            G = np.vstack([S, accel, D @ Su, b.masses @ du, prop.damping_form, du,
-                           np.sqrt(b.masses)[:, None] * S[n:], np.sqrt(b.stiffnesses)[:, None] * (D @ Su)])
+            accel[:, 2 * n + 1:] += inv_m
+            du = Su - u0_rows
+            drift = D @ Su
+            G = np.concatenate((S, accel, drift, (b.masses @ du)[None, :], prop.damping_form, du,
+                                sqrt_m * S[n:], sqrt_k * drift))
         if not np.isfinite(G).all():
             # the block exponential (and Van Loan's damping integral, which grows like
             # exp(2 zeta w h)) overflows: no step of this length can be computed
