@@ -294,12 +294,15 @@ class Building(Fmi2Slave):
         self._derived_rows = dict(zip(_DERIVED, self._derived_block))
         # Absolute acceleration = R z + f / m with z = [u; v].
         self._R = -np.hstack([building.K, building.C]) / building.masses[:, None]
-        # [drift; a] = P [u; v; f] for the linear building's outputs (_publish)
-        publish = np.zeros((2 * n, 3 * n))
+        # [drift; a; sqrt(m) v; sqrt(k) drift] = P [u; v; f] for the linear building's outputs (_publish)
+        publish = np.zeros((4 * n, 3 * n))
         publish[:n, :n] = np.eye(n) - np.eye(n, k=-1)
-        publish[n:, :2 * n] = self._R
-        publish[n:, 2 * n:] = np.diag(1.0 / building.masses)
+        publish[n:2 * n, :2 * n] = self._R
+        publish[n:2 * n, 2 * n:] = np.diag(1.0 / building.masses)
+        publish[2 * n:3 * n, n:2 * n] = np.diag(np.sqrt(building.masses))
+        publish[3 * n:, :n] = np.sqrt(building.stiffnesses)[:, None] * publish[:n, :n]
         self._publish_rows = publish
+        self._energy_halves = np.array([0, n])
         self._steps = {}
         self._step_aliases = {}
         self._stepped_lengths = frozenset()
@@ -314,15 +317,16 @@ class Building(Fmi2Slave):
             # the linear building: drift and acceleration in one product
             u, v = state.u, state.v
             w = self._publish_rows @ np.concatenate((u, v, force))
-            drift = w[:n]
             self.x[:n] = u
             self.v[:n] = v
-            self.drift[:n] = drift
-            self.a[:n] = w[n:]
-            k = self._building.stiffnesses
-            self.base_shear = float(k[0] * drift[0])
-            self.E_kinetic = 0.5 * float(v @ (self._building.masses * v))
-            self.E_strain = 0.5 * float(k @ (drift * drift))
+            self.drift[:n] = w[:n]
+            self.a[:n] = w[n:2 * n]
+            self.base_shear = self._k1 * float(u[0])          # the first storey's drift is u[0]
+            # twice the kinetic and strain energies as sums of squares of the last rows
+            roots = w[2 * n:]
+            kinetic, strain = np.add.reduceat(roots * roots, self._energy_halves).tolist()
+            self.E_kinetic = 0.5 * kinetic
+            self.E_strain = 0.5 * strain
         else:
             drift, V, accel, strain = self._integrator.response(state, force)
             self.x[:n] = state.u
