@@ -481,7 +481,7 @@ class Building(Fmi2Slave):
         except ValueError as exc:
             self._state = before
             raise SlaveError(f"{exc} (nothing was changed)") from None
-        if not math.isfinite(float(state.u.sum()) + float(state.v.sum())):
+        if not math.isfinite(sum(state.u.tolist()) + sum(state.v.tolist())):   # (Python floats: cheaper)
             self._state = before
             raise SlaveError(f"a step of h = {step_size!r} s would leave the building's state not finite: the "
                              f"inputs or the step are beyond what its arithmetic supports (nothing was changed)")
@@ -605,7 +605,7 @@ class Building(Fmi2Slave):
         values = self.ag_knot[:count].copy()
         listed = times.tolist()      # the checks on Python floats: the same IEEE comparisons, cheaper
         # (a sum that is not finite is looked at element by element)
-        if not math.isfinite(sum(listed) + float(values.sum())) and not (
+        if not math.isfinite(sum(listed) + sum(values.tolist())) and not (
                 np.isfinite(times).all() and np.isfinite(values).all()):
             for name, arr, unit in (("t_knot", times, "s"), ("ag_knot", values, "m/s2")):
                 bad = np.flatnonzero(~np.isfinite(arr))
