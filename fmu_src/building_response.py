@@ -808,16 +808,24 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             # decisions and the same deferred bounds.  A candidate with a slope of one sign whose
             # slope's Hermite range keeps that sign (within its bound) has its extremes at the ends
             # (the cheaper bound of that test failed for every candidate: `monotonic` above)
+            # (each Hermite range only where _peaks would take it: the slope's where the slope
+            # has one sign at both ends, the function's where that test did not decide)
             s0c, s1c = G[rows, 2, cols], G[rows, 3, cols]
-            err = bound5[rows, cols] * w4
-            slo, shi = hermite_ranges(s0c, s1c, length * G[rows, 4, cols], length * G[rows, 5, cols])
-            sign_kept = (s0c * s1c > 0.0) & ((slo - err > 0.0) | (shi + err < 0.0))
+            same = (s0c * s1c > 0.0).nonzero()[0]
+            if same.size:
+                r, c = rows[same], cols[same]
+                err = bound5[r, c] * w4
+                slo, shi = hermite_ranges(s0c[same], s1c[same], length * G[r, 4, c], length * G[r, 5, c])
+                sign_kept = np.zeros(rows.size, dtype=bool)
+                sign_kept[same] = (slo - err > 0.0) | (shi + err < 0.0)
+                left = (~sign_kept).nonzero()[0]
+                rows, cols, s0c, s1c = rows[left], cols[left], s0c[left], s1c[left]
             ends = G[rows, 1, cols]
             accel = cols >= two_n
             ends[accel] += accel_offset[cols[accel] - two_n]           # as _peaks' g1 (no 0.0 added elsewhere)
             lo, hi = hermite_ranges(G[rows, 0, cols] + offset[cols], ends, length * s0c, length * s1c)
             bound = np.maximum(-lo, hi) + bound4[rows, cols] * w4
-            deferred = ~sign_kept & ~(bound <= limits[rows, cols])
+            deferred = ~(bound <= limits[rows, cols])
             rows, cols, bound = rows[deferred].tolist(), cols[deferred].tolist(), bound[deferred].tolist()
         else:
             rows = cols = bound = []
