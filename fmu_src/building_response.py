@@ -593,8 +593,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # shortest and the longest sharing a map means all do (every step of a run, measured)
         uniform = ((shortest == positive[0] or cfg.segment_map(shortest) is first)
                    and (longest == positive[0] or cfg.segment_map(longest) is first))
-        if uniform and not inelastic:
-            return self._uniform_elastic_batch(state, times, ag, ag0, slope, p, force, cfg, first, count)
+        if uniform and not inelastic and knots is None:
+            return self._uniform_elastic_batch(state, times, ag, p, force, cfg, first, count)
         maps = [first] * count if uniform else [cfg.segment_map(L) for L in positive]
         if uniform:
             # z_1 .. z_count in one product, x = [z0; p; ag_0 .. ag_count-1; slope_0 .. slope_count-1];
@@ -722,20 +722,21 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         last = times.size - 1
         return cost, times, ag, (last if count == len(maps) else count if knots is None else knots[count])
 
-    def _uniform_elastic_batch(self, state, times, ag, ag0, slope, p, force, cfg, smap, count):
-        """:meth:`_advance_batch` of a linear building's step of intervals of one length (every
-        knot step of a run measured): no event can occur, so every interval is taken; the same
-        physics with the least numpy calls: the states by one product with the cached chain,
+    def _uniform_elastic_batch(self, state, times, ag, p, force, cfg, smap, count):
+        """:meth:`_advance_batch` of a linear building's step of intervals of one length and no
+        jump (every knot step of a run measured): no event can occur, so every interval is taken;
+        the same physics with the least numpy calls: the states and the ground acceleration's
+        slopes by one product with the cached chain of the knot values (:meth:`_knot_chain`),
         tier 1's reach of every watched function by one product with the plan's reach matrix
         (``|g(0)|`` plus the change bound, as in :meth:`legacy_rows`), both energy forms by one
         product over the intervals' ``Y' Y``."""
         n = self.n
         _, tier1, _, forms, chains, reach = self._batch_plan(smap)
-        chain = chains.get(count)
+        chain = chains.get(("knots", count))
         if chain is None:
-            chain = self._chain(smap, count)
+            chain = self._knot_chain(smap, count)
         chain, gather = chain
-        x = np.concatenate((state.u, state.v, p, ag0, slope))
+        x = np.concatenate((state.u, state.v, p, ag))
         known = np.concatenate((x, chain @ x))
         Y = known[gather]
         # against the peaks at the step start (a superset of what later intervals need, see
@@ -754,7 +755,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             cost.cleared = count
         state.E_damping += e_damp
         state.E_input += e_in
-        z = known[-2 * n:]          # a fresh product: nothing else writes to it
+        z = known[-(2 * n + count):-count]      # z_count, of a fresh product: nothing else writes to it
         u1 = z[:n]
         state.E_external += float(force @ (u1 - state.u))
         state.u = u1
@@ -938,6 +939,53 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             chains.pop(next(iter(chains)))
         chains[count] = (chain, gather)
         return chains[count]
+
+    def _knot_chain(self, smap, count: int):
+        """:meth:`_chain` for :meth:`_uniform_elastic_batch`: from ``x = [z0; p; ag_0 .. ag_count]``
+        (the knot values: fewer columns than values and slopes) the states ``z_1 .. z_count``
+        (rows of ``2n``) and then the slopes ``(ag_j+1 - ag_j) / L`` (``count`` rows), with the
+        index gathering the intervals' ``y = [z_j; ag_j; slope_j; p]`` rows from ``[x; chain @
+        x]``: ``(chain, gather)``.  With ``smap.state = [S, S_a, S_p]`` and ``S_a = [a0, a1]``
+        (the responses to ``ag`` and to its slope), interval i adds ``S^(j-1-i) (a0 ag_i + a1
+        (ag_i+1 - ag_i) / L)`` to ``z_j``: knot k enters ``z_j`` through ``S^(j-1-k) (a0 - a1 /
+        L)`` (k < j) and ``S^(j-k) a1 / L`` (1 <= k <= j).  Kept in the map's plan."""
+        n = self.n
+        two_n = 2 * n
+        state = smap.state
+        S, Sa, Sp = state[:, :two_n], state[:, two_n:two_n + 2], state[:, two_n + 2:]
+        inv_length = 1.0 / smap.length
+        own = Sa[:, 0] - Sa[:, 1] * inv_length       # knot k's weight through interval k
+        ahead = Sa[:, 1] * inv_length                # knot k's weight through interval k - 1
+        width = 3 * n + count + 1
+        chain = np.zeros((count * two_n + count, width))
+        power = np.eye(two_n)                        # S^j
+        forced = np.zeros((two_n, n))                # sum_{i<j} S^i S_p
+        own_powers = np.empty((count, two_n))        # S^m own
+        ahead_powers = np.empty((count, two_n))      # S^m ahead
+        for j in range(1, count + 1):
+            own_powers[j - 1] = power @ own
+            ahead_powers[j - 1] = power @ ahead
+            forced = forced + power @ Sp
+            power = S @ power
+            block = chain[(j - 1) * two_n:j * two_n]
+            block[:, :two_n] = power
+            block[:, two_n:3 * n] = forced
+            block[:, 3 * n:3 * n + j] = own_powers[j - 1::-1].T           # knots 0 .. j-1
+            block[:, 3 * n + 1:3 * n + j + 1] += ahead_powers[j - 1::-1].T  # knots 1 .. j
+        intervals = np.arange(count)
+        chain[count * two_n + intervals, 3 * n + intervals] = -inv_length
+        chain[count * two_n + intervals, 3 * n + 1 + intervals] = inv_length
+        gather = np.empty((count, 3 * n + 2), dtype=np.intp)
+        gather[0, :two_n] = np.arange(two_n)
+        gather[1:, :two_n] = width + np.arange((count - 1) * two_n).reshape(count - 1, two_n)
+        gather[:, two_n] = 3 * n + intervals
+        gather[:, two_n + 1] = width + count * two_n + intervals
+        gather[:, two_n + 2:] = two_n + np.arange(n)
+        chains = self._batch_plan(smap)[4]
+        if len(chains) >= MAX_CHAINS:
+            chains.pop(next(iter(chains)))
+        chains[("knots", count)] = (chain, gather)
+        return chains[("knots", count)]
 
     def fits_unmapped(self, h: float) -> bool:
         """True if :meth:`advance_unmapped` can take a step of ``h`` s (its quadrature stays within

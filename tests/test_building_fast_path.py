@@ -264,3 +264,31 @@ def test_reading_the_storey_shears_leaves_the_deferred_peak_searches_deferred():
         # from different running peaks (their thresholds), so their paths may differ by that
         np.testing.assert_allclose(lazy._derived_array(name), eager._derived_array(name), rtol=1e-12, atol=0.0)
     assert np.all(lazy._derived_array("mu")[:n] > 1.0)
+
+
+@pytest.mark.parametrize("count", [1, 2, 7, 32])
+def test_the_knot_chain_gives_the_chain_of_values_and_slopes(count):
+    """ExactPiecewiseLinear._knot_chain (a linear building's knot steps: the knot values in, the
+    states and slopes out) gives every interval's y = [z_j; ag_j; slope_j; p] and the end state of
+    _chain (values and slopes in, each interval's map applied in turn) to round-off: a knot's
+    weight through the interval before it (S^(j-k) a1 / L) left out or misplaced fails by O(1).
+    Tolerance: the two sum the same terms in different orders (and a0 - a1/L once), a few eps of
+    the largest term, here < 1e-13 relative to each column's magnitude."""
+    building = ShearBuilding(np.array([2e5, 1.8e5, 1.5e5]), np.array([3e8, 2.5e8, 2e8]), 0.05)
+    integ = integrator_for(building, StoreyHysteresis("linear", np.zeros(3)))
+    n = 3
+    smap = integ.configuration(np.zeros(n, dtype=np.int64)).segment_map(0.01)
+    rng = np.random.default_rng(count)
+    u, v, p = rng.normal(size=n) * 1e-2, rng.normal(size=n) * 1e-1, rng.normal(size=n) * 1e4
+    ag = rng.normal(size=count + 1) * 3.0
+    chain, gather = integ._chain(smap, count)
+    x = np.concatenate((u, v, p, ag[:-1], (ag[1:] - ag[:-1]) / smap.length))
+    known = np.concatenate((x, chain @ x))
+    knot_chain, knot_gather = integ._knot_chain(smap, count)
+    x2 = np.concatenate((u, v, p, ag))
+    known2 = np.concatenate((x2, knot_chain @ x2))
+    Y, Y2 = known[gather], known2[knot_gather]
+    scale = np.abs(Y).max(axis=0)
+    assert np.all(np.abs(Y2 - Y) <= 1e-13 * scale)
+    end, end2 = known[-2 * n:], known2[-(2 * n + count):-count]
+    assert np.all(np.abs(end2 - end) <= 1e-13 * np.abs(np.concatenate((Y[:, :2 * n], end[None, :]))).max(axis=0))
