@@ -885,12 +885,11 @@ class ImpactResolver:
             same = prev if prev and prev[0][5] == approaching else ()
         refine = self._refine_peak
         if len(same) == 2 and same[1][1] >= same[0][1] and same[1][1] >= fs:
-            # the maximum lies on the step into the middle sample or on the one out of it
+            # the maximum lies on the step into the middle sample or on the one out of it:
+            # one search along both, end to end
             peak = max(peak, same[1][1])
-            for accepted in (same[1][8], step):
-                if accepted is not None:
-                    p, n_ev = refine(*accepted)
-                    peak, nfev = max(peak, p), nfev + n_ev
+            p, n_ev = self._refine_across(same[1][8], step)
+            peak, nfev = max(peak, p), nfev + n_ev
         if branch_end and step is not None and same and fs >= same[-1][1]:
             p, n_ev = refine(*step)           # rising into the branch's end: along the located step
             peak, nfev = max(peak, p), nfev + n_ev
@@ -907,6 +906,32 @@ class ImpactResolver:
         if F > self.F_max:
             self.F_max = F
         return nfev
+
+    def _refine_across(self, first, second):
+        """Largest scaled force along two consecutive accepted steps, each ``(start, length)``
+        or None (:meth:`_sample`), taken end to end: one bounded search over their joined
+        length, each point on the step it falls in, re-integrated from that step's start (the
+        second's start may differ from the first's end by a correction, rule 2)."""
+        if first is None or second is None:
+            accepted = first if second is None else second
+            return self._refine_peak(*accepted) if accepted is not None else (0.0, 0)
+        (s1, span1), (s2, span2) = first, second
+        if not (span1 > 0.0 and span2 > 0.0):
+            (p1, n1), (p2, n2) = self._refine_peak(s1, span1), self._refine_peak(s2, span2)
+            return max(p1, p2), n1 + n2
+        rtol, dp_step = self.rtol, self._dp_step
+        f1, f2 = self._kernels[s1[5]], self._kernels[s2[5]]
+        _, _, d1, u1, acc1, _, al1, al11 = s1[:8]
+        _, _, d2, u2, acc2, _, al2, al21 = s2[:8]
+
+        def minus_force(x):
+            if x <= span1:
+                return -dp_step(f1, al1, al11, d1, u1, acc1, x, rtol, rtol)[3]
+            return -dp_step(f2, al2, al21, d2, u2, acc2, x - span1, rtol, rtol)[3]
+
+        span = span1 + span2
+        lowest, calls = bounded_minimum(minus_force, span, _PEAK_XATOL * span)
+        return -lowest, 6 * calls
 
     def _refine_peak(self, sample, span):
         """Largest scaled force along a DP step of length in (0, span] from ``sample`` (the
