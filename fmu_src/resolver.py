@@ -863,12 +863,15 @@ class ImpactResolver:
         ``step``: the accepted Dormand-Prince step that ended here, as (its start, as a sample
         tuple, and its scaled length), None at a branch's first point; a step that ends at the
         end of the approach branch (maximum penetration) is the located one.  Where the
-        samples of a branch show a local maximum, the force is maximised along each of the two
-        accepted steps around it (a bounded Brent search, :func:`bounded_minimum`), each
-        re-integrated from its own accepted start, with the external acceleration it used:
-        the trajectory the resolver actually took, after any correction at a communication
-        step's start.  So is the step that rises into the end of the approach branch.  The
-        peak is never below the largest sample, and it does not depend on where samples fall.
+        samples of a branch show a local maximum, the force is maximised along the two
+        accepted steps around it, end to end (one bounded Brent search, :func:`bounded_minimum`,
+        :meth:`_refine_across`), each re-integrated from its own accepted start with the
+        external acceleration it used: the trajectory the resolver actually took, after any
+        correction at a communication step's start (rule 2).  So is the step that rises into
+        the end of the approach branch.  The peak is never below the largest sample, and it
+        does not depend on where samples fall.  (The search this replaced ran one DP step from
+        the sample before the maximum: at a step's boundary that is the previous step's end
+        state, before the correction, with the previous step's external acceleration.)
         """
         peak = fs
         nfev = 0
@@ -883,7 +886,6 @@ class ImpactResolver:
                 same = prev if second[5] == approaching else (first,)
         else:
             same = prev if prev and prev[0][5] == approaching else ()
-        refine = self._refine_peak
         if len(same) == 2 and same[1][1] >= same[0][1] and same[1][1] >= fs:
             # the maximum lies on the step into the middle sample or on the one out of it:
             # one search along both, end to end
@@ -891,7 +893,7 @@ class ImpactResolver:
             p, n_ev = self._refine_across(same[1][8], step)
             peak, nfev = max(peak, p), nfev + n_ev
         if branch_end and step is not None and same and fs >= same[-1][1]:
-            p, n_ev = refine(*step)           # rising into the branch's end: along the located step
+            p, n_ev = self._refine_peak(*step)   # rising into the branch's end: along the located step
             peak, nfev = max(peak, p), nfev + n_ev
         self._prev = (prev[-1], sample) if prev else (sample,)
         if self.trace is not None:
