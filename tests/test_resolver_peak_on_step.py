@@ -15,7 +15,7 @@ search on the interpolant to 1e-13 of the interval), written here:
 The search it replaced started from the sample before the local maximum, that is, at a
 communication step's boundary, from the previous step's end state before the correction and
 with the previous step's external acceleration: a trajectory the resolver did not take.  It
-fails the second test by up to 7 % (tests/test_resolver_peak_on_step.py, measured with the
+fails test_peak_on_the_accepted_trajectory_when_the_push_changes by up to 7 % (measured with the
 search of 3893349).
 """
 from __future__ import annotations
