@@ -724,6 +724,8 @@ class ImpactResolver:
                 g = self._event_function(event)
                 hs, d1, u1, _, _, n_ev = self._locate(f, al_t, al1, d, u, acc, hs, stepped, g, atol, rtol)
                 nfev += n_ev
+                # the located step, from its accepted start: where a peak before the event is searched
+                located = ((base + tau, 0.0, d, u, acc, self.approaching, al_t, al1), hs)
                 tau += hs
                 e += self._dissipated(d, u, d1, u1, al_t, al1, hs)
                 e_top = e - margin if e - margin > e_top else e_top
@@ -736,7 +738,7 @@ class ImpactResolver:
                     u = 0.0
                     f_end = f(d, 0.0)
                     nfev += self._sample(base + tau, f_end, d, u, al0 + al1 * tau - f_end, al0 + al1 * tau, al1,
-                                         True, out, F0, branch_end=True)
+                                         True, out, F0, located, branch_end=True)
                     self._switch_to_restitution(d, u, L)
                     self.sticking = self._holds(d, al0 + al1 * tau)
                 else:                                     # re-approach: the dashpot acts again ...
@@ -752,11 +754,13 @@ class ImpactResolver:
                                          out, F0)
                 dtau = hs if hs > 0.0 else dtau
                 continue
+            # the accepted step, from its start: where the force's peak is searched (_sample)
+            accepted = ((base + tau, 0.0, d, u, acc, self.approaching, al_t, al1), hs)
             tau += hs
             e += dissipated(d, u, d1, u1, al_t, al1, hs)
             e_top = e - margin if e - margin > e_top else e_top
             d, u, acc = d1, u1, acc1
-            nfev += sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0)
+            nfev += sample(base + tau, f1, d, u, acc, al0 + al1 * tau, al1, self.approaching, out, F0, accepted)
             if not last:
                 # min(5.0, 0.9 * max(err, 1e-10) ** -0.2): the same values (NaN included)
                 grow = 0.9 * (1e-10 if 1e-10 > err else err) ** -0.2
@@ -852,18 +856,27 @@ class ImpactResolver:
         t_re = self._locate(f, al_t, al1, d, u, acc, hs, stepped, self._event_function("reapproach"), atol, rtol)[0]
         return "separation" if t_sep <= t_re else "reapproach"
 
-    def _sample(self, tau, fs, d, u, acc, al, al1, approaching, out, F0, branch_end=False) -> int:
+    def _sample(self, tau, fs, d, u, acc, al, al1, approaching, out, F0, step=None,
+                branch_end=False) -> int:
         """Track the peak force at an accepted point; returns the force evaluations spent.
 
-        A sampled local maximum (or a rise into the end of the approach branch) is refined
-        by maximising the force along one Dormand-Prince step from the earlier sample
-        (bounded Brent search, :func:`bounded_minimum`), so the peak does not depend on where
-        samples fall.
+        ``step``: the accepted Dormand-Prince step that ended here, as (its start, as a sample
+        tuple, and its scaled length), None at a branch's first point; a step that ends at the
+        end of the approach branch (maximum penetration) is the located one.  Where the
+        samples of a branch show a local maximum, the force is maximised along the two
+        accepted steps around it, end to end (one bounded Brent search, :func:`bounded_minimum`,
+        :meth:`_refine_across`), each re-integrated from its own accepted start with the
+        external acceleration it used: the trajectory the resolver actually took, after any
+        correction at a communication step's start (rule 2).  So is the step that rises into
+        the end of the approach branch.  The peak is never below the largest sample, and it
+        does not depend on where samples fall.  (The search this replaced ran one DP step from
+        the sample before the maximum: at a step's boundary that is the previous step's end
+        state, before the correction, with the previous step's external acceleration.)
         """
         peak = fs
         nfev = 0
         prev = self._prev
-        sample = (tau, fs, d, u, acc, approaching, al, al1)
+        sample = (tau, fs, d, u, acc, approaching, al, al1, step)
         # the earlier samples on the same branch, in order (at most the last two)
         if len(prev) == 2:
             first, second = prev
@@ -874,10 +887,13 @@ class ImpactResolver:
         else:
             same = prev if prev and prev[0][5] == approaching else ()
         if len(same) == 2 and same[1][1] >= same[0][1] and same[1][1] >= fs:
-            p, n_ev = self._refine_peak(same[0], tau - same[0][0])
-            peak, nfev = max(peak, same[1][1], p), nfev + n_ev
-        if branch_end and same and fs >= same[-1][1]:
-            p, n_ev = self._refine_peak(same[-1], tau - same[-1][0])
+            # the maximum lies on the step into the middle sample or on the one out of it:
+            # one search along both, end to end
+            peak = max(peak, same[1][1])
+            p, n_ev = self._refine_across(same[1][8], step)
+            peak, nfev = max(peak, p), nfev + n_ev
+        if branch_end and step is not None and same and fs >= same[-1][1]:
+            p, n_ev = self._refine_peak(*step)   # rising into the branch's end: along the located step
             peak, nfev = max(peak, p), nfev + n_ev
         self._prev = (prev[-1], sample) if prev else (sample,)
         if self.trace is not None:
@@ -893,9 +909,36 @@ class ImpactResolver:
             self.F_max = F
         return nfev
 
+    def _refine_across(self, first, second):
+        """Largest scaled force along two consecutive accepted steps, each ``(start, length)``
+        or None (:meth:`_sample`), taken end to end: one bounded search over their joined
+        length, each point on the step it falls in, re-integrated from that step's start (the
+        second's start may differ from the first's end by a correction, rule 2)."""
+        if first is None or second is None:
+            accepted = first if second is None else second
+            return self._refine_peak(*accepted) if accepted is not None else (0.0, 0)
+        (s1, span1), (s2, span2) = first, second
+        if not (span1 > 0.0 and span2 > 0.0):
+            (p1, n1), (p2, n2) = self._refine_peak(s1, span1), self._refine_peak(s2, span2)
+            return max(p1, p2), n1 + n2
+        rtol, dp_step = self.rtol, self._dp_step
+        f1, f2 = self._kernels[s1[5]], self._kernels[s2[5]]
+        _, _, d1, u1, acc1, _, al1, al11 = s1[:8]
+        _, _, d2, u2, acc2, _, al2, al21 = s2[:8]
+
+        def minus_force(x):
+            if x <= span1:
+                return -dp_step(f1, al1, al11, d1, u1, acc1, x, rtol, rtol)[3]
+            return -dp_step(f2, al2, al21, d2, u2, acc2, x - span1, rtol, rtol)[3]
+
+        span = span1 + span2
+        lowest, calls = bounded_minimum(minus_force, span, _PEAK_XATOL * span)
+        return -lowest, 6 * calls
+
     def _refine_peak(self, sample, span):
-        """Largest scaled force along a DP step of length in (0, span] from ``sample``."""
-        _, f0, d, u, acc, approaching, al, al1 = sample
+        """Largest scaled force along a DP step of length in (0, span] from ``sample`` (the
+        accepted start of a step, a sample tuple)."""
+        _, f0, d, u, acc, approaching, al, al1 = sample[:8]
         if not span > 0.0:
             return f0, 0
         f = self._kernels[approaching]
