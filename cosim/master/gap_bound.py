@@ -571,6 +571,9 @@ class _LinearPair:
         self._modal = (self.q[:, None], self._b[:, None])   # (q, q' + zeta w q) as stacked columns
         self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
 
+    #: :meth:`_state` sums each level's free rate bound (:class:`_ExactPair` has it in its table)
+    _rates = True
+
     def _tables(self, H: float) -> tuple:
         """``(Ac, As, ground rows of the levels' floors)`` of both buildings, stacked."""
         fl, fr = self.fl, self.fr
@@ -602,14 +605,15 @@ class _LinearPair:
         np.multiply(qd, qd, out=square)
         speed += square
         np.sqrt(speed, out=speed)
-        rate_l, rate_r = self._rate_parts
-        speed_l, speed_r = self._speed_parts
-        np.matmul(bl.abs_phi, speed_l, out=rate_l)
-        np.matmul(br.abs_phi, speed_r, out=rate_r)
-        # each level's rate slack factor: 0.5 (rate_l + rate_r), times dS per horizon (prove)
-        half = self._half_rate[:, 0]
-        np.add(self.rate[self.rows_l], self.rate[self.rows_r], out=half)
-        half *= 0.5
+        if self._rates:
+            rate_l, rate_r = self._rate_parts
+            speed_l, speed_r = self._speed_parts
+            np.matmul(bl.abs_phi, speed_l, out=rate_l)
+            np.matmul(br.abs_phi, speed_r, out=rate_r)
+            # each level's rate slack factor: 0.5 (rate_l + rate_r), times dS per horizon (prove)
+            half = self._half_rate[:, 0]
+            np.add(self.rate[self.rows_l], self.rate[self.rows_r], out=half)
+            half *= 0.5
         self._key = key
         self._free = {}
 
@@ -731,43 +735,120 @@ class _ExactPair(_LinearPair):
     mean of its ends by at most ``L dS / 2``, ``L`` a bound on its rate: ``|x_f'| <= sum_j |Phi_fj|
     A_j`` with ``A_j = sqrt(w_j^2 q_j^2 + q_j'^2)``, which damping only lowers and the modal load
     raises by at most its integral, so ``A_j(s) <= A_j(0) + |Gamma_j| int_0^s |g_grid| + |phi_j'
-    F| s``.  :data:`EXACT_MARGIN` covers the round-off of the computed motion."""
+    F| s``.  :data:`EXACT_MARGIN` covers the round-off of the computed motion.
+
+    Each level's row of :attr:`answer` (its penetration now, on every grid interval the mean of
+    the ends' known penetration plus the free rate's slack less the gap plus :data:`EXACT_MARGIN`,
+    and a last 1: no interval may close, ``H``) is two small matrix products per proof, with tables
+    made once per horizon (:meth:`_table`).  The ground's response is a convolution: the floor
+    kernels are Toeplitz (the response at point ``k`` to the hat at point ``i >= 1`` depends on
+    ``k - i`` only), so each level's response to ``g`` is ``F @ M`` with ``F`` (levels x lags)
+    its kernel's column and ``M[d, k] = g[k - d]`` a view of ``g`` padded with zeros (a few kB
+    instead of the levels' full kernel, levels x points x points: a proof touches less memory).
+    The first grid value's half hat, the free motion (``q``, ``q' + zeta w q``), the free rates'
+    slack (``|P| A``) and the gap are the state's product, ``(S * s) @ modes`` with ``s = [q, q' +
+    zeta w q, A, g_0, 1]`` and ``S`` the levels' mode shapes (``|P|`` for the rates, one column
+    per level for ``g_0`` and 1).  The terms that vary along the grid with the ground (its
+    integral in the rate bound, the bend's bound) are added to it."""
 
     def __init__(self, gaps: "OpenGaps", left: str, right: str, positions: list, fl: np.ndarray,
                  fr: np.ndarray, gap: np.ndarray):
         super().__init__(gaps, left, right, positions, fl, fr, gap)
         bl, br = self.bounds
         # each level's rate gain per unit of int |g|: (|phi_l| |Gamma_l|)[fl] + (...)[fr], halved
-        # as _half_rate is (the slack is L dS / 2)
+        # as the free rate's slack is (the slack is L dS / 2)
         self._ground_gain = (0.5 * ((bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]))[:, None]
-        self._exact: dict = {}          # H -> the levels' penetration kernel (levels x points x points)
+        self._exact: dict = {}          # H -> (lags, modes, the ground's rate gain times dS, the bend's rows)
+        m, n, p = self.m, self.w.size, GRID + 1
+        # the ground on the grid after GRID zeros: M[d, k] = g[k - d] is a view of it (rows d = 0..GRID
+        # start at GRID - d), filled by GroundAhead.on_grid
+        padded = np.zeros(GRID + p)
+        self._ground = padded[GRID:]
+        self._toeplitz = np.lib.stride_tricks.sliding_window_view(padded, p)[GRID::-1]
+        self._convolved = np.empty((m, p))
+        # s = [q | q' + zeta w q | A | g_0 per level | 1 per level]: _LinearPair._state writes q, b
+        # and the speeds A through these views
+        self._s = np.empty(3 * n + 2 * m)
+        s = self._s
+        s[3 * n + m:] = 1.0
+        self._g0 = s[3 * n:3 * n + m]
+        self.q, self._b, self._speed = s[:n], s[n:2 * n], s[2 * n:3 * n]
+        nl = self.nl
+        self._q_parts = (self.q[:nl], self.q[nl:])
+        self._speed_parts = (self._speed[:nl], self._speed[nl:])
+        self._modal = (self.q[:, None], self._b[:, None])
+        # the levels' mode shapes for q and q' + zeta w q (left less right), |.| for the rates
+        shapes = np.hstack((bl.phi[fl], -br.phi[fr]))
+        self._shapes = np.hstack((shapes, shapes, bl.abs_phi[fl], br.abs_phi[fr], np.eye(m), np.eye(m)))
+        self._weighted = np.empty(self._shapes.shape)
+        self._intervals = np.empty((m, GRID))
 
-    def _kernel(self, H: float) -> np.ndarray:
-        kernel = self._exact.get(H)
-        if kernel is None:
-            if len(self._exact) > 16:
-                self._exact.pop(next(iter(self._exact)))
-            bl, br = self.bounds
-            kernel = bl.floor_kernels(H)[self.fl] - br.floor_kernels(H)[self.fr]
-            kernel = self._exact[H] = kernel.reshape(self.m * (GRID + 1), GRID + 1)
-        return kernel
+    _rates = False                  # the free rates' slack is in the tables (_table)
+
+    def _table(self, H: float) -> tuple:
+        """``(lags, modes, gain, bend)`` at horizon ``H`` (class docstring): ``lags`` (levels x
+        lags) the ground's convolution, in the intervals' means (``lags @ M`` at point ``k >= 1``
+        is the mean of the response at ``k - 1`` and ``k``); ``gain`` (levels x 1) times ``int
+        |g|`` the rate bound's ground part, ``bend`` (levels x intervals) times the bend's bound
+        its response's (both buildings' rows summed).  Made once per horizon."""
+        tables = self._exact.get(H)
+        if tables is not None:
+            return tables
+        if len(self._exact) > 16:
+            self._exact.pop(next(iter(self._exact)))
+        bl, br = self.bounds
+        fl, fr, m, p = self.fl, self.fr, self.m, GRID + 1
+        dS = H / GRID
+        slack = dS                      # the rate bound's slack is L dS / 2 (the gains hold the half)
+        cl, cr = bl._cached(H), br._cached(H)
+
+        def answer_rows(points: np.ndarray) -> np.ndarray:
+            # (rows, points) -> (rows, GRID + 2): the value now, each interval's mean of its ends, 0
+            rows = np.zeros((points.shape[0], p + 1))
+            rows[:, 0] = points[:, 0]
+            rows[:, 1:p] = 0.5 * (points[:, :-1] + points[:, 1:])
+            return rows
+        # the levels' kernels (levels x points k x grid values i), a hat's response by lag k - i
+        kernels = bl.floor_kernels(H)[fl] - br.floor_kernels(H)[fr]
+        lag = np.zeros((m, p))
+        lag[:, :GRID] = kernels[:, 1:, 1]             # lag d = k - 1 of the hat at i = 1; lag GRID: 0
+        lags = 0.5 * lag
+        lags[:, 1:] += 0.5 * lag[:, :-1]              # the mean of lags d and d - 1: an interval's mean
+        # the first grid value's half hat, less what the convolution gave it (the lag's column)
+        half = answer_rows(kernels[:, :, 0] - lag)
+        half[:, 0] = kernels[:, 0, 0] - lags[:, 0]    # point 0: the convolution gave it lags[:, 0] g_0
+        constant = np.zeros((m, p + 1))
+        constant[:, :p] = -self.gap
+        constant[:, 1:p] += EXACT_MARGIN
+        constant[:, p] = 1.0                          # no interval closes: H
+        rates = np.zeros((self.w.size, p + 1))
+        rates[:, 1:p] = 0.5 * slack
+        # each mode's free motion, Ac (from q) then As (from q' + zeta w q), the rate slack, g_0, 1
+        modes = np.vstack((answer_rows(np.vstack((cl[1], cr[1], cl[2], cr[2]))), rates, half, constant))
+        # the bend's response: each building's bound of the whole ground's, levels' rows summed
+        bend = cl[4][fl, 1:] + cr[4][fr, 1:]
+        tables = self._exact[H] = (lags, modes, self._ground_gain * slack, bend)
+        return tables
 
     def prove(self, y: np.ndarray, H: float, ground: "GroundAhead", forces: dict, out: list) -> None:
         """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
         self._state(y)
-        residual_rows = self._tables(H)[2]
-        free = self._free_floors(H)
-        g, rest, integral = ground.on_grid()
-        m = self.m
-        delta = (self._kernel(H) @ g).reshape(m, GRID + 1)
-        delta += free[self.rows_l]
-        delta -= free[self.rows_r]
-        delta -= self.gap
+        lags, modes, gain, bend = self._table(H)
+        g, rest, integral = ground.on_grid(self._ground)
+        self._g0[:] = g[0]
+        np.multiply(self._shapes, self._s, out=self._weighted)
+        np.matmul(self._weighted, modes, out=self.answer)
+        convolved = self._convolved
+        np.matmul(lags, self._toeplitz, out=convolved)
+        self.answer[:, :-1] += convolved
+        upper = self._upper
+        # what the ground adds to the rate bound by each interval's end, and the bend's response
+        extra = self._intervals
+        np.multiply(gain, integral[1:], out=extra)
+        upper += extra
+        np.multiply(bend, rest[1:], out=extra)
+        upper += extra
         dS = H / GRID
-        # the rate bound on each interval, halved: free part, then what the ground can add by the
-        # interval's end
-        half = self._ground_gain * integral[1:]
-        half += self._half_rate
         if forces:
             (bl, br) = self.bounds
             s = _grid(H)
@@ -778,16 +859,15 @@ class _ExactPair(_LinearPair):
                 load = bound.phi.T @ force                       # modal load (held)
                 step = bound.step_response(H)                     # modes x points
                 moved = bound.phi[floors] @ (step * load[:, None])
-                delta += moved if sign > 0.0 else -moved
-                half += (0.5 * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]
-        upper = delta[:, :-1] + delta[:, 1:]
-        upper *= 0.5
-        half *= dS
-        upper += half
-        upper += residual_rows[:m] * rest[1:]
-        upper += residual_rows[m:] * rest[1:]
-        upper += EXACT_MARGIN
-        _answer(upper, delta[:, 0], self.positions, out, dS, H, H, closed=0.0)
+                moved *= sign
+                self._answer_now[:] += moved[:, 0]
+                upper += 0.5 * (moved[:, :-1] + moved[:, 1:])
+                upper += (0.5 * dS * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]
+        # the first entry >= 0: 0 closed now, 1..GRID the first interval that may close, GRID + 1
+        # the last 1 (none)
+        np.greater_equal(self.answer, 0.0, out=self.bad)
+        for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
+            out[pos] = 0.0 if not f else min(H, float(f - 1) * dS) if f <= GRID else H
 
 
 class _BilinearPair:
@@ -1188,14 +1268,17 @@ class GroundAhead:
         hi = int(times.searchsorted(self.t0 + self.H, "left")) + 1
         return float(_MAX.reduce(np.abs(self.values[lo:hi])))
 
-    def on_grid(self) -> tuple[np.ndarray, np.ndarray]:
+    def on_grid(self, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(g, rest, integral)``: the ground acceleration at the grid points ``t0 + s_k``
         (m/s^2), ``max |ag - g_grid|`` over ``[t0, t0 + s_k]`` (m/s^2), ``g_grid`` the polyline
         through ``g``, and a bound on ``int_0^s_k |g_grid|`` (m/s).  What lies between them is the polyline's bend at the knots inside a grid
-        interval, largest at a knot, widened by :data:`GROUND_ROUNDOFF` of the largest ``|g|``."""
+        interval, largest at a knot, widened by :data:`GROUND_ROUNDOFF` of the largest ``|g|``.
+        ``out``: where ``g`` is written too (GRID + 1 values)."""
         times, values, t0 = self.times, self.values, self.t0
         s = t0 + _grid(self.H)
         g = _interp(s, times, values)
+        if out is not None:
+            out[:] = g
         lo = times.searchsorted(s[0], "right")
         hi = times.searchsorted(s[-1], "left")
         if hi > lo:
