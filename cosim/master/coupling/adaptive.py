@@ -577,6 +577,10 @@ class Adaptive(CouplingStrategy):
                 vec[f] += sign * F
         return forces
 
+    def sleeping(self):
+        """The sleeping contacts (:mod:`cosim.master.dormancy`), by name."""
+        return self._dormancy.sleeping if self._dormancy is not None else ()
+
     def finish(self) -> None:
         if self._dormancy is not None:
             self._dormancy.wake_all()
