@@ -481,7 +481,7 @@ MUTATIONS = {
     # int |g_grid| halved (GroundAhead.on_grid)
     "ground: integral halved": ("        pieces *= 0.5 * self.H / GRID\n", "        pieces *= 0.25 * self.H / GRID\n"),
     # _LinearPair (horizons < EXACT_MIN_HORIZON, free masses): rate slack halved, forced bound at the start
-    "linear: rate slack halved": ("        upper += self._half_rate * dS\n", "        upper += 0.5 * self._half_rate * dS\n"),
+    "linear: rate slack halved": ("self._free_rows(H, H / GRID)", "self._free_rows(H, 0.5 * H / GRID)"),
     "linear: forced bound at the interval's start": ("        np.multiply(ground_rows, ground[1:], out=forced)\n",
                                                      "        np.multiply(ground_rows, ground[:-1], out=forced)\n"),
     # running_max_abs: the knots between grid points left out of |ag|'s bound

@@ -507,18 +507,30 @@ def _stacked_tables(cache: dict, key, bounds, parts) -> tuple:
     return tables
 
 
+def _answer_rows(points: np.ndarray) -> np.ndarray:
+    """Rows of values on the grid (rows x points) in a proof's answer layout (rows x GRID + 2): the
+    value now, each interval's mean of its ends, 0 (for the last 1)."""
+    rows = np.zeros((points.shape[0], GRID + 2))
+    rows[:, 0] = points[:, 0]
+    rows[:, 1:-1] = 0.5 * (points[:, :-1] + points[:, 1:])
+    return rows
+
+
 class _LinearPair:
     """The levels between two linear buildings, proven as :meth:`OpenGaps.horizons` does with
-    fewer numpy calls (each ~1 us: their count is a proof's cost), bit for bit:
+    fewer numpy calls (each ~1 us: their count is a proof's cost); the same bounds, summed in
+    another order (round-off only: tests/test_gap_bound_fast.py finds the same horizons):
 
     * both buildings' floors read in one gather, their modal state (:meth:`ModalBound.modal_state`)
       computed into one stacked vector (the products per building, written in place; the
       elementwise parts once for both), kept while the reads are the same (a step proves its
       gaps over a few horizons from one state);
-    * the free motion ``Q = Ac q + As (q' + zeta w q)`` of both buildings in one product of the
-      stacked tables (per horizon), every floor's ``phi @ Q`` per building (OpenBLAS computes a
-      product's rows alike only for some row counts: ``phi[fl] @ Q`` may differ from ``(phi @
-      Q)[fl]`` in the last bits), kept per state and horizon; the levels' floors gathered at once;
+    * what is linear in the state, one product per proof in the answer's layout: with ``s = [q,
+      q' + zeta w q, A, 1]`` and the levels' mode shapes ``S`` (left less right; ``|P|`` for the
+      free rate bounds ``A``; one column per level for the constant), ``(S * s) @ modes`` is each
+      level's penetration now and, on every grid interval, the mean of its ends' free part plus
+      the free rate's slack ``|P| A dS / 2`` less the gap (``modes``: the free motion's tables
+      ``Ac``, ``As`` per horizon, in the same layout);
     * the ground's forced bound of the levels' floors only (an elementwise product), stacked;
     * per level ``delta(0)``, the grid intervals' upper bounds and a sentinel ``1`` in one row:
       one comparison and one ``argmax`` say whether the gap is closed now, the first interval
@@ -551,15 +563,23 @@ class _LinearPair:
         self._reads = np.empty(self.reads.size)
         r = self._reads
         self._reads_parts = (r[:nl], r[nl:nr2], r[nr2:nr2 + br.n], r[nr2 + br.n:])
-        self.q, self.qd, self.rate, self._b, self._speed, self._square = (np.empty(n) for _ in range(6))
+        # the state's product (:meth:`prove`): s = [q | q' + zeta w q | A | 1 per level | (g_0 per
+        # level, _ExactPair)]; _state writes q, b and the speeds A through views of it
+        self._s = np.empty(3 * n + (2 if self._half_hat else 1) * m)
+        s = self._s
+        s[3 * n:3 * n + m] = 1.0
+        self.q, self._b, self._speed = s[:n], s[n:2 * n], s[2 * n:3 * n]
+        self.qd, self._square = np.empty(n), np.empty(n)
         self._q_parts = (self.q[:nl], self.q[nl:])
         self._qd_parts = (self.qd[:nl], self.qd[nl:])
         self._speed_parts = (self._speed[:nl], self._speed[nl:])
-        self._rate_parts = (self.rate[:nl], self.rate[nl:])
-        self._half_rate = np.empty((m, 1))  # 0.5 (rate_l + rate_r) of each level, as a column
-        self._Q, self._Q_part = np.empty((n, GRID + 1)), np.empty((n, GRID + 1))
-        self._delta = np.empty((m, GRID + 1))
-        self._delta_ends = (self._delta[:, :-1], self._delta[:, 1:], self._delta[:, 0])
+        # the levels' mode shapes for q and q' + zeta w q (left less right), |.| for the rates, and
+        # one column per level for the constant (and g_0)
+        shapes = np.hstack((bl.phi[fl], -br.phi[fr]))
+        rates = np.hstack((bl.abs_phi[fl], br.abs_phi[fr]))
+        self._shapes = np.hstack((shapes, shapes, rates) + (np.eye(m),) * (2 if self._half_hat else 1))
+        self._weighted = np.empty(self._shapes.shape)
+        self._half_rates = 0.5 * rates      # each level's 0.5 (rate_l + rate_r) from the speeds A
         self._forced = np.empty((2 * m, GRID))
         self._forced_parts = (self._forced[:m], self._forced[m:])
         self.answer = np.empty((m, GRID + 2))
@@ -568,17 +588,39 @@ class _LinearPair:
         self.bad = np.empty((m, GRID + 2), dtype=bool)
         self._by_h: dict = {}           # H -> (stacked Ac, stacked As, stacked ground rows of the levels)
         self._key = None                # the reads (bytes) of the state below
-        self._modal = (self.q[:, None], self._b[:, None])   # (q, q' + zeta w q) as stacked columns
-        self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
 
-    #: :meth:`_state` sums each level's free rate bound (:class:`_ExactPair` has it in its table)
-    _rates = True
+    #: the state's product carries each level's g_0 (:class:`_ExactPair`'s first grid value)
+    _half_hat = False
+
+    def _free_rows(self, H: float, slack: float) -> np.ndarray:
+        """The state's table for ``q``, ``q' + zeta w q`` and the speeds ``A`` (rows) in the
+        answer's layout (:func:`_answer_rows`): each mode's free motion ``Ac`` then ``As`` (both
+        buildings stacked), and the free rates' slack ``A slack / 2`` on every interval."""
+        cl, cr = self.bounds[0]._cached(H), self.bounds[1]._cached(H)
+        rates = np.zeros((self.w.size, GRID + 2))
+        rates[:, 1:-1] = 0.5 * slack
+        return np.vstack((_answer_rows(np.vstack((cl[1], cr[1], cl[2], cr[2]))), rates))
+
+    def _constant_rows(self, margin: float = 0.0) -> np.ndarray:
+        """The levels' constant in the answer's layout: less the gap, on every interval plus
+        ``margin``, and the last 1 (no interval closes: ``H``)."""
+        constant = np.zeros((self.m, GRID + 2))
+        constant[:, :-1] = -self.gap
+        constant[:, 1:-1] += margin
+        constant[:, -1] = 1.0
+        return constant
 
     def _tables(self, H: float) -> tuple:
-        """``(Ac, As, ground rows of the levels' floors)`` of both buildings, stacked."""
-        fl, fr = self.fl, self.fr
-        return self._by_h.get(H) or _stacked_tables(self._by_h, H, self.bounds, lambda cl, cr: (
-            (cl[1], cr[1]), (cl[2], cr[2]), (cl[4][fl, 1:], cr[4][fr, 1:])))
+        """``(modes, ground rows of the levels' floors)`` at ``H``: the state's table
+        (:meth:`prove`) and both buildings' forced bound per unit ``|ag|``, stacked."""
+        tables = self._by_h.get(H)
+        if tables is None:
+            if len(self._by_h) > _HORIZONS_KEPT:
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = self.bounds[0]._cached(H), self.bounds[1]._cached(H)
+            tables = self._by_h[H] = (np.vstack((self._free_rows(H, H / GRID), self._constant_rows())),
+                                      np.vstack((cl[4][self.fl, 1:], cr[4][self.fr, 1:])))
+        return tables
 
     def _state(self, y: np.ndarray) -> None:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
@@ -605,38 +647,7 @@ class _LinearPair:
         np.multiply(qd, qd, out=square)
         speed += square
         np.sqrt(speed, out=speed)
-        if self._rates:
-            rate_l, rate_r = self._rate_parts
-            speed_l, speed_r = self._speed_parts
-            np.matmul(bl.abs_phi, speed_l, out=rate_l)
-            np.matmul(br.abs_phi, speed_r, out=rate_r)
-            # each level's rate slack factor: 0.5 (rate_l + rate_r), times dS per horizon (prove)
-            half = self._half_rate[:, 0]
-            np.add(self.rate[self.rows_l], self.rate[self.rows_r], out=half)
-            half *= 0.5
         self._key = key
-        self._free = {}
-
-    def _free_floors(self, H: float) -> np.ndarray:
-        """Every floor's free motion over ``H`` (both buildings stacked, floors x points), kept
-        per state (:meth:`_state`) and horizon."""
-        free = self._free.get(H)
-        if free is None:
-            Ac, As, _ = self._tables(H)
-            q, b = self._modal
-            Q = self._Q
-            np.multiply(Ac, q, out=Q)
-            part = self._Q_part
-            np.multiply(As, b, out=part)
-            Q += part
-            (bl, br), nl = self.bounds, self.nl
-            free = np.empty(Q.shape)
-            np.matmul(bl.phi, Q[:nl], out=free[:nl])
-            np.matmul(br.phi, Q[nl:], out=free[nl:])
-            if len(self._free) > 8:         # a few horizons per state
-                self._free.clear()
-            self._free[H] = free
-        return free
 
     def open_throughout(self, y: np.ndarray, H: float, peak: float, forces: dict) -> bool:
         """True when every level's gap provably stays open over all of ``[0, H]`` (s) by the coarse
@@ -671,7 +682,7 @@ class _LinearPair:
         free += (v_l[rows_l] - v_r[rows_r]) * H
         free += d0
         bound = _MAX(d0, free, out=free)
-        bound += self._half_rate[:, 0] * (H / GRID)
+        bound += (self._half_rates @ self._speed) * (H / GRID)
         load = self._coarse_ground * peak
         if forces:
             for name, modes, floors in ((self.left, self.bounds[0], self.fl), (self.right, self.bounds[1], self.fr)):
@@ -685,23 +696,15 @@ class _LinearPair:
     def prove(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, out: list) -> None:
         """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
         self._state(y)
-        ground_rows = self._tables(H)[2]
-        free = self._free_floors(H)
+        modes, ground_rows = self._tables(H)
         dS = H / GRID
-        m = self.m
-        # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its ends
-        # + L dS / 2; forced part at its end (as horizons)
-        delta = self._delta
-        np.subtract(free[self.rows_l], free[self.rows_r], out=delta)
-        delta -= self.gap
-        before, after, now = self._delta_ends
-        upper = self._upper
-        np.add(before, after, out=upper)
-        upper *= 0.5
-        upper += self._half_rate * dS
-        # the forced bound of the levels' floors: FloorMotion's ground term (an elementwise
-        # product: the levels' rows alone) plus, with a held force, its modal term (a matrix
-        # product: every floor's, then the levels')
+        # each level's penetration now and, on each interval, the free part's mean of its ends plus
+        # L dS / 2 (its largest value is at most that), less the gap (the state's product)
+        np.multiply(self._shapes, self._s, out=self._weighted)
+        np.matmul(self._weighted, modes, out=self.answer)
+        # the forced bound of the levels' floors at each interval's end: FloorMotion's ground term
+        # (an elementwise product: the levels' rows alone) plus, with a held force, its modal term
+        # (a matrix product: every floor's, then the levels')
         forced = self._forced
         np.multiply(ground_rows, ground[1:], out=forced)
         forced_l, forced_r = self._forced_parts
@@ -711,9 +714,9 @@ class _LinearPair:
                 force = forces.get(name)
                 if force is not None and _ANY(force):
                     part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
+        upper = self._upper
         upper += forced_l
         upper += forced_r
-        self._answer_now[:] = now
         np.greater_equal(self.answer, 0.0, out=self.bad)
         for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
             if f:                               # f = 0: closed now (0 s)
@@ -759,31 +762,17 @@ class _ExactPair(_LinearPair):
         # as the free rate's slack is (the slack is L dS / 2)
         self._ground_gain = (0.5 * ((bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]))[:, None]
         self._exact: dict = {}          # H -> (lags, modes, the ground's rate gain times dS, the bend's rows)
-        m, n, p = self.m, self.w.size, GRID + 1
+        m = self.m
         # the ground on the grid after GRID zeros: M[d, k] = g[k - d] is a view of it (rows d = 0..GRID
         # start at GRID - d), filled by GroundAhead.on_grid
-        padded = np.zeros(GRID + p)
+        padded = np.zeros(GRID + GRID + 1)
         self._ground = padded[GRID:]
-        self._toeplitz = np.lib.stride_tricks.sliding_window_view(padded, p)[GRID::-1]
-        self._convolved = np.empty((m, p))
-        # s = [q | q' + zeta w q | A | g_0 per level | 1 per level]: _LinearPair._state writes q, b
-        # and the speeds A through these views
-        self._s = np.empty(3 * n + 2 * m)
-        s = self._s
-        s[3 * n + m:] = 1.0
-        self._g0 = s[3 * n:3 * n + m]
-        self.q, self._b, self._speed = s[:n], s[n:2 * n], s[2 * n:3 * n]
-        nl = self.nl
-        self._q_parts = (self.q[:nl], self.q[nl:])
-        self._speed_parts = (self._speed[:nl], self._speed[nl:])
-        self._modal = (self.q[:, None], self._b[:, None])
-        # the levels' mode shapes for q and q' + zeta w q (left less right), |.| for the rates
-        shapes = np.hstack((bl.phi[fl], -br.phi[fr]))
-        self._shapes = np.hstack((shapes, shapes, bl.abs_phi[fl], br.abs_phi[fr], np.eye(m), np.eye(m)))
-        self._weighted = np.empty(self._shapes.shape)
+        self._toeplitz = np.lib.stride_tricks.sliding_window_view(padded, GRID + 1)[GRID::-1]
+        self._convolved = np.empty((m, GRID + 1))
+        self._g0 = self._s[-m:]         # g_0 once per level (the state's product, _LinearPair)
         self._intervals = np.empty((m, GRID))
 
-    _rates = False                  # the free rates' slack is in the tables (_table)
+    _half_hat = True
 
     def _table(self, H: float) -> tuple:
         """``(lags, modes, gain, bend)`` at horizon ``H`` (class docstring): ``lags`` (levels x
@@ -801,13 +790,6 @@ class _ExactPair(_LinearPair):
         dS = H / GRID
         slack = dS                      # the rate bound's slack is L dS / 2 (the gains hold the half)
         cl, cr = bl._cached(H), br._cached(H)
-
-        def answer_rows(points: np.ndarray) -> np.ndarray:
-            # (rows, points) -> (rows, GRID + 2): the value now, each interval's mean of its ends, 0
-            rows = np.zeros((points.shape[0], p + 1))
-            rows[:, 0] = points[:, 0]
-            rows[:, 1:p] = 0.5 * (points[:, :-1] + points[:, 1:])
-            return rows
         # the levels' kernels (levels x points k x grid values i), a hat's response by lag k - i
         kernels = bl.floor_kernels(H)[fl] - br.floor_kernels(H)[fr]
         lag = np.zeros((m, p))
@@ -815,16 +797,10 @@ class _ExactPair(_LinearPair):
         lags = 0.5 * lag
         lags[:, 1:] += 0.5 * lag[:, :-1]              # the mean of lags d and d - 1: an interval's mean
         # the first grid value's half hat, less what the convolution gave it (the lag's column)
-        half = answer_rows(kernels[:, :, 0] - lag)
+        half = _answer_rows(kernels[:, :, 0] - lag)
         half[:, 0] = kernels[:, 0, 0] - lags[:, 0]    # point 0: the convolution gave it lags[:, 0] g_0
-        constant = np.zeros((m, p + 1))
-        constant[:, :p] = -self.gap
-        constant[:, 1:p] += EXACT_MARGIN
-        constant[:, p] = 1.0                          # no interval closes: H
-        rates = np.zeros((self.w.size, p + 1))
-        rates[:, 1:p] = 0.5 * slack
-        # each mode's free motion, Ac (from q) then As (from q' + zeta w q), the rate slack, g_0, 1
-        modes = np.vstack((answer_rows(np.vstack((cl[1], cr[1], cl[2], cr[2]))), rates, half, constant))
+        # the state's table: each mode's free motion, the rate slack, the constant, g_0 (_LinearPair)
+        modes = np.vstack((self._free_rows(H, slack), self._constant_rows(EXACT_MARGIN), half))
         # the bend's response: each building's bound of the whole ground's, levels' rows summed
         bend = cl[4][fl, 1:] + cr[4][fr, 1:]
         tables = self._exact[H] = (lags, modes, self._ground_gain * slack, bend)
@@ -1554,9 +1530,9 @@ class OpenGaps:
 
     def _linear_horizons(self, y: np.ndarray, H: float, ground, forces: dict,
                          which: Sequence[int] | None) -> list[float]:
-        """:meth:`horizons` when every building is linear (:class:`_LinearPair`): the same
-        operations in the same order as :meth:`horizons` and :class:`FloorMotion`, so the same
-        horizons to the last bit."""
+        """:meth:`horizons` when every building is linear (:class:`_LinearPair`): the same bounds
+        as :meth:`horizons` and :class:`FloorMotion` in fewer calls (round-off aside: the same
+        horizons, tests/test_gap_bound_fast.py)."""
         exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
         plan = self._linear_plan(which, exact)
         out = [0.0] * sum(len(p.positions) for p in plan)
