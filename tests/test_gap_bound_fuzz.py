@@ -774,8 +774,8 @@ def test_reused_proofs_answer_as_fresh_ones():
 
 CACHE_MUTATIONS = {
     # a pair that keeps its first state whatever it reads
-    "stale linear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        bl, br = self.bounds\n",
-                           "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        bl, br = self.bounds\n"),
+    "stale linear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        q, qd, speed",
+                           "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        q, qd, speed"),
     "stale bilinear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        n, nl",
                              "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        n, nl"),
 }

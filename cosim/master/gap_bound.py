@@ -542,7 +542,9 @@ class _LinearPair:
         self.bounds = (gaps.buildings[left][0], gaps.buildings[right][0])
         bl, br = self.bounds
         self.nl, n = bl.n, bl.n + br.n
-        self.reads = np.concatenate((gaps._reads[left], gaps._reads[right]))
+        # the floors' displacements (row 0) and velocities (row 1) of both buildings, left then right
+        (_, xl, vl), (_, xr, vr) = gaps.buildings[left], gaps.buildings[right]
+        self.reads = np.vstack((np.concatenate((xl, xr)), np.concatenate((vl, vr))))
         self.w = np.concatenate((bl.w, br.w))
         self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
         m = fl.size
@@ -559,19 +561,24 @@ class _LinearPair:
                                    for b, f in ((bl, fl), (br, fr)))
         # buffers every proof writes into, and the views of them it reads (made once: a view
         # costs about as much as a small numpy operation)
-        nl, nr2 = self.nl, 2 * self.nl
-        self._reads = np.empty(self.reads.size)
+        nl = self.nl
+        self._reads = np.empty(self.reads.shape)
         r = self._reads
-        self._reads_parts = (r[:nl], r[nl:nr2], r[nr2:nr2 + br.n], r[nr2 + br.n:])
+        self._reads_parts = (r[0, :nl], r[1, :nl], r[0, nl:], r[1, nl:])
+        # both buildings' q = to_modal @ u (and q' from v) in one product: the block-diagonal
+        # to_modal, transposed (the reads are rows)
+        self._to_modal_t = np.zeros((n, n))
+        self._to_modal_t[:nl, :nl] = bl.to_modal.T
+        self._to_modal_t[nl:, nl:] = br.to_modal.T
         # the state's product (:meth:`prove`): s = [q | q' + zeta w q | A | 1 per level | (g_0 per
         # level, _ExactPair)]; _state writes q, b and the speeds A through views of it
         self._s = np.empty(3 * n + (2 if self._half_hat else 1) * m)
         s = self._s
         s[3 * n:3 * n + m] = 1.0
         self.q, self._b, self._speed = s[:n], s[n:2 * n], s[2 * n:3 * n]
-        self.qd, self._square = np.empty(n), np.empty(n)
+        self._modal_pair = s[:2 * n].reshape(2, n)    # [q; q'], then q' + zeta w q in place
+        self.qd, self._square = s[n:2 * n], np.empty(n)
         self._q_parts = (self.q[:nl], self.q[nl:])
-        self._qd_parts = (self.qd[:nl], self.qd[nl:])
         self._speed_parts = (self._speed[:nl], self._speed[nl:])
         # the levels' mode shapes for q and q' + zeta w q (left less right), |.| for the rates, and
         # one column per level for the constant (and g_0)
@@ -630,23 +637,16 @@ class _LinearPair:
         key = reads.tobytes()
         if key == self._key:
             return
-        bl, br = self.bounds
-        q, qd, b, speed = self.q, self.qd, self._b, self._speed
-        u_l, v_l, u_r, v_r = self._reads_parts
-        q_l, q_r = self._q_parts
-        qd_l, qd_r = self._qd_parts
-        np.matmul(bl.to_modal, u_l, out=q_l)
-        np.matmul(bl.to_modal, v_l, out=qd_l)
-        np.matmul(br.to_modal, u_r, out=q_r)
-        np.matmul(br.to_modal, v_r, out=qd_r)
-        np.multiply(self.zeta_w, q, out=b)
-        b += qd
+        q, qd, speed = self.q, self.qd, self._speed
+        np.matmul(reads, self._to_modal_t, out=self._modal_pair)    # q, q' (qd and b share a place)
         np.multiply(self.w, q, out=speed)
         np.square(speed, out=speed)
         square = self._square
         np.multiply(qd, qd, out=square)
         speed += square
         np.sqrt(speed, out=speed)
+        np.multiply(self.zeta_w, q, out=square)
+        qd += square                                                # b = q' + zeta w q
         self._key = key
 
     def open_throughout(self, y: np.ndarray, H: float, peak: float, forces: dict) -> bool:
