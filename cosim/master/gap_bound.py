@@ -461,17 +461,6 @@ class FloorMotion:
         return bound.drift_phi @ self.Q, forced, bound.abs_drift_phi @ self.speed
 
 
-def _as_slice(index: np.ndarray):
-    """``index`` (ints) as a slice where it is evenly spaced and increasing (a view, no copy),
-    else itself."""
-    if index.size == 1:
-        return slice(int(index[0]), int(index[0]) + 1)
-    step = int(index[1] - index[0])
-    if step > 0 and np.array_equal(np.diff(index), np.full(index.size - 1, step)):
-        return slice(int(index[0]), int(index[-1]) + 1, step)
-    return index
-
-
 def _answer(upper: np.ndarray, now: np.ndarray, positions, out: list, dS: float, H: float, limit: float,
             closed: float | None = None) -> None:
     """Each level's horizon into ``out`` at its position from its grid intervals' upper bounds
@@ -549,9 +538,6 @@ class _LinearPair:
         self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
         m = fl.size
         self.m = m
-        # the levels' floors in the stacked rows: views where they are evenly spaced (no copy)
-        self.rows_l, self.rows_r = _as_slice(fl), _as_slice(bl.n + fr)
-        self._fr_own = _as_slice(fr)    # the right floors in the right building's own reads
         # each level's gain of the coarse bound (open_throughout) per unit of |ag|: sum_j |Phi_fj
         # Gamma_j| of both floors, the forced bound's weights on G_j(s) <= s^2 / 2
         self._coarse_ground = (bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]
@@ -559,12 +545,19 @@ class _LinearPair:
         # |q_j''| = |c_j q_j' + w_j (w_j q_j)| <= sqrt(c_j^2 + w_j^2) A_j, c_j = 2 zeta_j w_j
         self._coarse_accel = tuple(b.abs_phi[f] * np.sqrt(b.w * b.w + 4.0 * b.zeta_w * b.zeta_w)
                                    for b, f in ((bl, fl), (br, fr)))
+        # the coarse bound's products: each level's floors' difference (left less right) of the
+        # reads' rows (displacements, velocities), and from the speeds A its free acceleration
+        # bound and half rate (as columns)
+        n = bl.n + br.n
+        self._coarse_difference = np.zeros((n, m))
+        self._coarse_difference[fl, np.arange(m)] = 1.0
+        self._coarse_difference[bl.n + fr, np.arange(m)] = -1.0
+        self._coarse_speeds = np.hstack(self._coarse_accel).T      # (n, m); the half rates joined below
+        self._coarse_rows = (bl.abs_phi[fl], br.abs_phi[fr])        # the levels' |phi| (held forces)
         # buffers every proof writes into, and the views of them it reads (made once: a view
         # costs about as much as a small numpy operation)
         nl = self.nl
         self._reads = np.empty(self.reads.shape)
-        r = self._reads
-        self._reads_parts = (r[0, :nl], r[1, :nl], r[0, nl:], r[1, nl:])
         # both buildings' q = to_modal @ u (and q' from v) in one product: the block-diagonal
         # to_modal, transposed (the reads are rows)
         self._to_modal_t = np.zeros((n, n))
@@ -578,8 +571,6 @@ class _LinearPair:
         self.q, self._b, self._speed = s[:n], s[n:2 * n], s[2 * n:3 * n]
         self._modal_pair = s[:2 * n].reshape(2, n)    # [q; q'], then q' + zeta w q in place
         self.qd, self._square = s[n:2 * n], np.empty(n)
-        self._q_parts = (self.q[:nl], self.q[nl:])
-        self._speed_parts = (self._speed[:nl], self._speed[nl:])
         # the levels' mode shapes for q and q' + zeta w q (left less right), |.| for the rates, and
         # one column per level for the constant (and g_0)
         shapes = np.hstack((bl.phi[fl], -br.phi[fr]))
@@ -587,6 +578,8 @@ class _LinearPair:
         self._shapes = np.hstack((shapes, shapes, rates) + (np.eye(m),) * (2 if self._half_hat else 1))
         self._weighted = np.empty(self._shapes.shape)
         self._half_rates = 0.5 * rates      # each level's 0.5 (rate_l + rate_r) from the speeds A
+        self._coarse_speeds = np.hstack((self._coarse_speeds, self._half_rates.T))
+        self._coarse_reads, self._coarse_rates = np.empty((2, m)), np.empty(2 * m)
         self._forced = np.empty((2 * m, GRID))
         self._forced_parts = (self._forced[:m], self._forced[m:])
         self.answer = np.empty((m, GRID + 2))
@@ -670,25 +663,23 @@ class _LinearPair:
         with ``peak`` (m/s^2) at least ``|ag|`` over the horizon.  So in exact arithmetic its
         bound on every interval lies under ``max(d0, d0 + v0 H + a H^2 / 2) + R dS / 2 + P H^2 / 2``."""
         self._state(y)
-        u_l, v_l, u_r, v_r = self._reads_parts
-        rows_l, rows_r = self.rows_l, self._fr_own
-        d0 = u_l[rows_l] - u_r[rows_r]
-        d0 -= self.gap[:, 0]
-        speed_l, speed_r = self._speed_parts
-        accel_l, accel_r = self._coarse_accel
-        free = accel_l @ speed_l
-        free += accel_r @ speed_r
-        free *= 0.5 * H * H
-        free += (v_l[rows_l] - v_r[rows_r]) * H
+        m = self.m
+        diff, rates = self._coarse_reads, self._coarse_rates
+        np.matmul(self._reads, self._coarse_difference, out=diff)     # x_l - x_r, v_l - v_r
+        np.matmul(self._speed, self._coarse_speeds, out=rates)        # a, then R / 2
+        d0 = diff[0] - self.gap[:, 0]
+        free = rates[:m] * (0.5 * H * H)
+        free += diff[1] * H
         free += d0
         bound = _MAX(d0, free, out=free)
-        bound += (self._half_rates @ self._speed) * (H / GRID)
+        bound += rates[m:] * (H / GRID)
         load = self._coarse_ground * peak
         if forces:
-            for name, modes, floors in ((self.left, self.bounds[0], self.fl), (self.right, self.bounds[1], self.fr)):
+            for name, modes, rows in ((self.left, self.bounds[0], self._coarse_rows[0]),
+                                      (self.right, self.bounds[1], self._coarse_rows[1])):
                 force = forces.get(name)
                 if force is not None and _ANY(force):
-                    load += modes.abs_phi[floors] @ np.abs(modes.phi.T @ force)
+                    load += rows @ np.abs(modes.phi.T @ force)
         load *= 0.5 * H * H
         bound += load
         return bound
