@@ -462,20 +462,24 @@ MUTATIONS = {
     "exact: rate slack halved": ("        slack = dS                      # the rate bound's slack",
                                  "        slack = 0.5 * dS                # the rate bound's slack"),
     # _ExactPair: the rate bound without what the ground adds to it
-    "exact: no ground in the rate bound": ("        np.multiply(gain, integral[1:], out=extra)\n        upper += extra\n", ""),
+    "exact: no ground in the rate bound": (
+        "        np.multiply(gain, integral[1:], out=extra)\n        upper += extra\n", ""),
     # _ExactPair: the ground's response (the convolution on the grid) left out
     "exact: no ground response": ("        self.answer[:, :-1] += convolved\n", ""),
     # _ExactPair: the convolution one lag late (the response to the ground a grid interval behind)
-    "exact: ground response a lag late": ("        lag[:, :GRID] = kernels[:, 1:, 1]", "        lag[:, 1:] = kernels[:, 1:, 1]"),
+    "exact: ground response a lag late": ("        lag[:, :GRID] = kernels[:, 1:, 1]",
+                                          "        lag[:, 1:] = kernels[:, 1:, 1]"),
     # _ExactPair: held forces not moving the floors / not in the rate bound
     "exact: held force left out": ("                self._answer_now[:] += moved[:, 0]\n"
                                    "                upper += 0.5 * (moved[:, :-1] + moved[:, 1:])\n", ""),
     "exact: held force not in the rate bound": (
         "                upper += (0.5 * dS * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]\n", ""),
     # _ExactPair: the last grid interval (the horizon's end) not checked (answer: [now, intervals, 1])
-    "exact: horizon's end unchecked": (_ANSWER, _ANSWER.replace("out=self.bad)\n", "out=self.bad)\n        self.bad[:, -2] = False\n")),
+    "exact: horizon's end unchecked": (
+        _ANSWER, _ANSWER.replace("out=self.bad)\n", "out=self.bad)\n        self.bad[:, -2] = False\n")),
     # every other grid interval checked (a coarser grid)
-    "exact: every other interval checked": (_ANSWER, _ANSWER.replace("out=self.bad)\n", "out=self.bad)\n        self.bad[:, 2:-1:2] = False\n")),
+    "exact: every other interval checked": (
+        _ANSWER, _ANSWER.replace("out=self.bad)\n", "out=self.bad)\n        self.bad[:, 2:-1:2] = False\n")),
     # the ground kernels without the first grid value's half hat
     "kernels: first grid value left out": ("        kernels[:, :, 0] = half\n", "        kernels[:, :, 0] = 0.0\n"),
     # int |g_grid| halved (GroundAhead.on_grid)
@@ -774,8 +778,9 @@ def test_reused_proofs_answer_as_fresh_ones():
 
 CACHE_MUTATIONS = {
     # a pair that keeps its first state whatever it reads
-    "stale linear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        q, qd, speed",
-                           "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        q, qd, speed"),
+    "stale linear state": (
+        "        key = reads.tobytes()\n        if key == self._key:\n            return\n        q, qd, speed",
+        "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        q, qd, speed"),
     "stale bilinear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        n, nl",
                              "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        n, nl"),
 }
