@@ -508,3 +508,33 @@ def test_a_wrong_declaration_is_safe():
     assert busy
     again = _free_masses(12, busy[1:])          # the steps that start in contact
     np.testing.assert_array_equal(again[0], ref[0])
+
+
+# -- the per-step tail passes over sleeping contacts ------------------------------------------------
+def test_guard_and_recorder_pass_over_sleeping_contacts(catalog, monkeypatch):
+    """kasai_maison (8 contacts, most asleep at most steps): the recorder and the guard given the
+    sleeping contacts (simulate's loop, :meth:`Adaptive.sleeping`) keep the same impacts, onsets,
+    impact rows and peaks as when every contact is looked at after every step (the strategy's
+    ``sleeping`` emptied), and the guard's counters end the same."""
+    from cosim.master import guard as guard_module
+    from cosim.master.coupling.adaptive import Adaptive
+
+    seen = []
+    check = guard_module.StabilityGuard.check
+
+    def keep(self, t, h, asleep=()):
+        seen.append(self)
+        seen.append(len(asleep))
+        return check(self, t, h, asleep)
+    monkeypatch.setattr(guard_module.StabilityGuard, "check", keep)
+    passing = simulate_scene(catalog, "kasai_maison", record="summary", output_interval=None)
+    guard_passing, skipped = seen[0], sum(seen[1::2])
+    seen.clear()
+    monkeypatch.setattr(Adaptive, "sleeping", lambda self: ())
+    looking = simulate_scene(catalog, "kasai_maison", record="summary", output_interval=None)
+    guard_looking = seen[0]
+    assert skipped > 1000                  # contacts passed over, summed over the steps
+    assert passing.onsets == looking.onsets and passing.impact_rows == looking.impact_rows
+    assert passing.peaks == looking.peaks and passing.first_onsets == looking.first_onsets
+    for name in ("_impacts", "_total_impacts", "_substeps", "_since", "_onset", "_touching", "E_avail", "steps"):
+        assert getattr(guard_passing, name) == getattr(guard_looking, name), name

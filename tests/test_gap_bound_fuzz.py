@@ -447,34 +447,45 @@ def test_proof_never_passes_the_true_motion(chunk):
 
 
 # -- the fuzz can fail: each term of the proofs broken in a copy of the module --------------------------
+#: where _ExactPair.prove reads its answer (the first entry >= 0 of each level's [now, intervals, 1])
+_ANSWER = ("        np.greater_equal(self.answer, 0.0, out=self.bad)\n"
+           "        for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):\n"
+           "            out[pos] = 0.0")
 #: (name, text in gap_bound.py, its replacement): a mutant of the proof that is unsound
 MUTATIONS = {
     # _ExactPair: the bend of the record between grid points left out
-    "exact: no bend bound": ("        upper += residual_rows[:m] * rest[1:]\n        upper += residual_rows[m:] * rest[1:]\n", ""),
+    "exact: no bend bound": ("        np.multiply(bend, rest[1:], out=extra)\n        upper += extra\n", ""),
     # _ExactPair: the bend taken at the interval's start, not its end
-    "exact: bend at the interval's start": ("        upper += residual_rows[:m] * rest[1:]\n", "        upper += residual_rows[:m] * rest[:-1]\n"),
-    # _ExactPair: the rate slack halved
-    "exact: rate slack halved": ("        half *= dS\n", "        half *= 0.5 * dS\n"),
+    "exact: bend at the interval's start": ("        np.multiply(bend, rest[1:], out=extra)\n",
+                                            "        np.multiply(bend, rest[:-1], out=extra)\n"),
+    # _ExactPair: the rate slack halved (the free rates' in the tables, the ground's gain)
+    "exact: rate slack halved": ("        slack = dS                      # the rate bound's slack",
+                                 "        slack = 0.5 * dS                # the rate bound's slack"),
     # _ExactPair: the rate bound without what the ground adds to it
-    "exact: no ground in the rate bound": ("        half = self._ground_gain * integral[1:]\n",
-                                           "        half = 0.0 * self._ground_gain * integral[1:]\n"),
+    "exact: no ground in the rate bound": (
+        "        np.multiply(gain, integral[1:], out=extra)\n        upper += extra\n", ""),
+    # _ExactPair: the ground's response (the convolution on the grid) left out
+    "exact: no ground response": ("        self.answer[:, :-1] += convolved\n", ""),
+    # _ExactPair: the convolution one lag late (the response to the ground a grid interval behind)
+    "exact: ground response a lag late": ("        lag[:, :GRID] = kernels[:, 1:, 1]",
+                                          "        lag[:, 1:] = kernels[:, 1:, 1]"),
     # _ExactPair: held forces not moving the floors / not in the rate bound
-    "exact: held force left out": ("                delta += moved if sign > 0.0 else -moved\n", ""),
+    "exact: held force left out": ("                self._answer_now[:] += moved[:, 0]\n"
+                                   "                upper += 0.5 * (moved[:, :-1] + moved[:, 1:])\n", ""),
     "exact: held force not in the rate bound": (
-        "                half += (0.5 * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]\n", ""),
-    # _ExactPair: the last grid interval (the horizon's end) not checked
-    # (in _answer, the helper every pair's proof answers through since mfast3)
-    "exact: horizon's end unchecked": ("    bad = upper >= 0.0\n    first = bad.argmax(axis=1).tolist()\n",
-                                       "    bad = upper >= 0.0\n    bad[:, -1] = False\n    first = bad.argmax(axis=1).tolist()\n"),
+        "                upper += (0.5 * dS * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]\n", ""),
+    # _ExactPair: the last grid interval (the horizon's end) not checked (answer: [now, intervals, 1])
+    "exact: horizon's end unchecked": (
+        _ANSWER, _ANSWER.replace("out=self.bad)\n", "out=self.bad)\n        self.bad[:, -2] = False\n")),
     # every other grid interval checked (a coarser grid)
-    "exact: every other interval checked": ("    bad = upper >= 0.0\n    first = bad.argmax(axis=1).tolist()\n",
-                                            "    bad = upper >= 0.0\n    bad[:, 1::2] = False\n    first = bad.argmax(axis=1).tolist()\n"),
+    "exact: every other interval checked": (
+        _ANSWER, _ANSWER.replace("out=self.bad)\n", "out=self.bad)\n        self.bad[:, 2:-1:2] = False\n")),
     # the ground kernels without the first grid value's half hat
     "kernels: first grid value left out": ("        kernels[:, :, 0] = half\n", "        kernels[:, :, 0] = 0.0\n"),
     # int |g_grid| halved (GroundAhead.on_grid)
-    "ground: integral halved": ("np.cumsum((0.5 * self.H / GRID)", "np.cumsum((0.25 * self.H / GRID)"),
+    "ground: integral halved": ("        pieces *= 0.5 * self.H / GRID\n", "        pieces *= 0.25 * self.H / GRID\n"),
     # _LinearPair (horizons < EXACT_MIN_HORIZON, free masses): rate slack halved, forced bound at the start
-    "linear: rate slack halved": ("        upper += self._half_rate * dS\n", "        upper += 0.5 * self._half_rate * dS\n"),
+    "linear: rate slack halved": ("self._free_rows(H, H / GRID)", "self._free_rows(H, 0.5 * H / GRID)"),
     "linear: forced bound at the interval's start": ("        np.multiply(ground_rows, ground[1:], out=forced)\n",
                                                      "        np.multiply(ground_rows, ground[:-1], out=forced)\n"),
     # running_max_abs: the knots between grid points left out of |ag|'s bound
@@ -767,8 +778,9 @@ def test_reused_proofs_answer_as_fresh_ones():
 
 CACHE_MUTATIONS = {
     # a pair that keeps its first state whatever it reads
-    "stale linear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        bl, br = self.bounds\n",
-                           "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        bl, br = self.bounds\n"),
+    "stale linear state": (
+        "        key = reads.tobytes()\n        if key == self._key:\n            return\n        q, qd, speed",
+        "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        q, qd, speed"),
     "stale bilinear state": ("        key = reads.tobytes()\n        if key == self._key:\n            return\n        n, nl",
                              "        key = reads.tobytes()\n        if self._key is not None:\n            return\n        n, nl"),
 }

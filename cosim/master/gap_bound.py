@@ -461,17 +461,6 @@ class FloorMotion:
         return bound.drift_phi @ self.Q, forced, bound.abs_drift_phi @ self.speed
 
 
-def _as_slice(index: np.ndarray):
-    """``index`` (ints) as a slice where it is evenly spaced and increasing (a view, no copy),
-    else itself."""
-    if index.size == 1:
-        return slice(int(index[0]), int(index[0]) + 1)
-    step = int(index[1] - index[0])
-    if step > 0 and np.array_equal(np.diff(index), np.full(index.size - 1, step)):
-        return slice(int(index[0]), int(index[-1]) + 1, step)
-    return index
-
-
 def _answer(upper: np.ndarray, now: np.ndarray, positions, out: list, dS: float, H: float, limit: float,
             closed: float | None = None) -> None:
     """Each level's horizon into ``out`` at its position from its grid intervals' upper bounds
@@ -507,18 +496,30 @@ def _stacked_tables(cache: dict, key, bounds, parts) -> tuple:
     return tables
 
 
+def _answer_rows(points: np.ndarray) -> np.ndarray:
+    """Rows of values on the grid (rows x points) in a proof's answer layout (rows x GRID + 2): the
+    value now, each interval's mean of its ends, 0 (for the last 1)."""
+    rows = np.zeros((points.shape[0], GRID + 2))
+    rows[:, 0] = points[:, 0]
+    rows[:, 1:-1] = 0.5 * (points[:, :-1] + points[:, 1:])
+    return rows
+
+
 class _LinearPair:
     """The levels between two linear buildings, proven as :meth:`OpenGaps.horizons` does with
-    fewer numpy calls (each ~1 us: their count is a proof's cost), bit for bit:
+    fewer numpy calls (each ~1 us: their count is a proof's cost); the same bounds, summed in
+    another order (round-off only: tests/test_gap_bound_fast.py finds the same horizons):
 
     * both buildings' floors read in one gather, their modal state (:meth:`ModalBound.modal_state`)
       computed into one stacked vector (the products per building, written in place; the
       elementwise parts once for both), kept while the reads are the same (a step proves its
       gaps over a few horizons from one state);
-    * the free motion ``Q = Ac q + As (q' + zeta w q)`` of both buildings in one product of the
-      stacked tables (per horizon), every floor's ``phi @ Q`` per building (OpenBLAS computes a
-      product's rows alike only for some row counts: ``phi[fl] @ Q`` may differ from ``(phi @
-      Q)[fl]`` in the last bits), kept per state and horizon; the levels' floors gathered at once;
+    * what is linear in the state, one product per proof in the answer's layout: with ``s = [q,
+      q' + zeta w q, A, 1]`` and the levels' mode shapes ``S`` (left less right; ``|P|`` for the
+      free rate bounds ``A``; one column per level for the constant), ``(S * s) @ modes`` is each
+      level's penetration now and, on every grid interval, the mean of its ends' free part plus
+      the free rate's slack ``|P| A dS / 2`` less the gap (``modes``: the free motion's tables
+      ``Ac``, ``As`` per horizon, in the same layout);
     * the ground's forced bound of the levels' floors only (an elementwise product), stacked;
     * per level ``delta(0)``, the grid intervals' upper bounds and a sentinel ``1`` in one row:
       one comparison and one ``argmax`` say whether the gap is closed now, the first interval
@@ -530,14 +531,13 @@ class _LinearPair:
         self.bounds = (gaps.buildings[left][0], gaps.buildings[right][0])
         bl, br = self.bounds
         self.nl, n = bl.n, bl.n + br.n
-        self.reads = np.concatenate((gaps._reads[left], gaps._reads[right]))
+        # the floors' displacements (row 0) and velocities (row 1) of both buildings, left then right
+        (_, xl, vl), (_, xr, vr) = gaps.buildings[left], gaps.buildings[right]
+        self.reads = np.vstack((np.concatenate((xl, xr)), np.concatenate((vl, vr))))
         self.w = np.concatenate((bl.w, br.w))
         self.zeta_w = np.concatenate((bl.zeta_w, br.zeta_w))
         m = fl.size
         self.m = m
-        # the levels' floors in the stacked rows: views where they are evenly spaced (no copy)
-        self.rows_l, self.rows_r = _as_slice(fl), _as_slice(bl.n + fr)
-        self._fr_own = _as_slice(fr)    # the right floors in the right building's own reads
         # each level's gain of the coarse bound (open_throughout) per unit of |ag|: sum_j |Phi_fj
         # Gamma_j| of both floors, the forced bound's weights on G_j(s) <= s^2 / 2
         self._coarse_ground = (bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]
@@ -545,21 +545,41 @@ class _LinearPair:
         # |q_j''| = |c_j q_j' + w_j (w_j q_j)| <= sqrt(c_j^2 + w_j^2) A_j, c_j = 2 zeta_j w_j
         self._coarse_accel = tuple(b.abs_phi[f] * np.sqrt(b.w * b.w + 4.0 * b.zeta_w * b.zeta_w)
                                    for b, f in ((bl, fl), (br, fr)))
+        # the coarse bound's products: each level's floors' difference (left less right) of the
+        # reads' rows (displacements, velocities), and from the speeds A its free acceleration
+        # bound and half rate (as columns)
+        n = bl.n + br.n
+        self._coarse_difference = np.zeros((n, m))
+        self._coarse_difference[fl, np.arange(m)] = 1.0
+        self._coarse_difference[bl.n + fr, np.arange(m)] = -1.0
+        self._coarse_speeds = np.hstack(self._coarse_accel).T      # (n, m); the half rates joined below
+        self._coarse_rows = (bl.abs_phi[fl], br.abs_phi[fr])        # the levels' |phi| (held forces)
         # buffers every proof writes into, and the views of them it reads (made once: a view
         # costs about as much as a small numpy operation)
-        nl, nr2 = self.nl, 2 * self.nl
-        self._reads = np.empty(self.reads.size)
-        r = self._reads
-        self._reads_parts = (r[:nl], r[nl:nr2], r[nr2:nr2 + br.n], r[nr2 + br.n:])
-        self.q, self.qd, self.rate, self._b, self._speed, self._square = (np.empty(n) for _ in range(6))
-        self._q_parts = (self.q[:nl], self.q[nl:])
-        self._qd_parts = (self.qd[:nl], self.qd[nl:])
-        self._speed_parts = (self._speed[:nl], self._speed[nl:])
-        self._rate_parts = (self.rate[:nl], self.rate[nl:])
-        self._half_rate = np.empty((m, 1))  # 0.5 (rate_l + rate_r) of each level, as a column
-        self._Q, self._Q_part = np.empty((n, GRID + 1)), np.empty((n, GRID + 1))
-        self._delta = np.empty((m, GRID + 1))
-        self._delta_ends = (self._delta[:, :-1], self._delta[:, 1:], self._delta[:, 0])
+        nl = self.nl
+        self._reads = np.empty(self.reads.shape)
+        # both buildings' q = to_modal @ u (and q' from v) in one product: the block-diagonal
+        # to_modal, transposed (the reads are rows)
+        self._to_modal_t = np.zeros((n, n))
+        self._to_modal_t[:nl, :nl] = bl.to_modal.T
+        self._to_modal_t[nl:, nl:] = br.to_modal.T
+        # the state's product (:meth:`prove`): s = [q | q' + zeta w q | A | 1 per level | (g_0 per
+        # level, _ExactPair)]; _state writes q, b and the speeds A through views of it
+        self._s = np.empty(3 * n + (2 if self._half_hat else 1) * m)
+        s = self._s
+        s[3 * n:3 * n + m] = 1.0
+        self.q, self._b, self._speed = s[:n], s[n:2 * n], s[2 * n:3 * n]
+        self._modal_pair = s[:2 * n].reshape(2, n)    # [q; q'], then q' + zeta w q in place
+        self.qd, self._square = s[n:2 * n], np.empty(n)
+        # the levels' mode shapes for q and q' + zeta w q (left less right), |.| for the rates, and
+        # one column per level for the constant (and g_0)
+        shapes = np.hstack((bl.phi[fl], -br.phi[fr]))
+        rates = np.hstack((bl.abs_phi[fl], br.abs_phi[fr]))
+        self._shapes = np.hstack((shapes, shapes, rates) + (np.eye(m),) * (2 if self._half_hat else 1))
+        self._weighted = np.empty(self._shapes.shape)
+        self._half_rates = 0.5 * rates      # each level's 0.5 (rate_l + rate_r) from the speeds A
+        self._coarse_speeds = np.hstack((self._coarse_speeds, self._half_rates.T))
+        self._coarse_reads, self._coarse_rates = np.empty((2, m)), np.empty(2 * m)
         self._forced = np.empty((2 * m, GRID))
         self._forced_parts = (self._forced[:m], self._forced[m:])
         self.answer = np.empty((m, GRID + 2))
@@ -568,14 +588,39 @@ class _LinearPair:
         self.bad = np.empty((m, GRID + 2), dtype=bool)
         self._by_h: dict = {}           # H -> (stacked Ac, stacked As, stacked ground rows of the levels)
         self._key = None                # the reads (bytes) of the state below
-        self._modal = (self.q[:, None], self._b[:, None])   # (q, q' + zeta w q) as stacked columns
-        self._free: dict = {}           # H -> every floor's free motion, both buildings stacked
+
+    #: the state's product carries each level's g_0 (:class:`_ExactPair`'s first grid value)
+    _half_hat = False
+
+    def _free_rows(self, H: float, slack: float) -> np.ndarray:
+        """The state's table for ``q``, ``q' + zeta w q`` and the speeds ``A`` (rows) in the
+        answer's layout (:func:`_answer_rows`): each mode's free motion ``Ac`` then ``As`` (both
+        buildings stacked), and the free rates' slack ``A slack / 2`` on every interval."""
+        cl, cr = self.bounds[0]._cached(H), self.bounds[1]._cached(H)
+        rates = np.zeros((self.w.size, GRID + 2))
+        rates[:, 1:-1] = 0.5 * slack
+        return np.vstack((_answer_rows(np.vstack((cl[1], cr[1], cl[2], cr[2]))), rates))
+
+    def _constant_rows(self, margin: float = 0.0) -> np.ndarray:
+        """The levels' constant in the answer's layout: less the gap, on every interval plus
+        ``margin``, and the last 1 (no interval closes: ``H``)."""
+        constant = np.zeros((self.m, GRID + 2))
+        constant[:, :-1] = -self.gap
+        constant[:, 1:-1] += margin
+        constant[:, -1] = 1.0
+        return constant
 
     def _tables(self, H: float) -> tuple:
-        """``(Ac, As, ground rows of the levels' floors)`` of both buildings, stacked."""
-        fl, fr = self.fl, self.fr
-        return self._by_h.get(H) or _stacked_tables(self._by_h, H, self.bounds, lambda cl, cr: (
-            (cl[1], cr[1]), (cl[2], cr[2]), (cl[4][fl, 1:], cr[4][fr, 1:])))
+        """``(modes, ground rows of the levels' floors)`` at ``H``: the state's table
+        (:meth:`prove`) and both buildings' forced bound per unit ``|ag|``, stacked."""
+        tables = self._by_h.get(H)
+        if tables is None:
+            if len(self._by_h) > _HORIZONS_KEPT:
+                self._by_h.pop(next(iter(self._by_h)))
+            cl, cr = self.bounds[0]._cached(H), self.bounds[1]._cached(H)
+            tables = self._by_h[H] = (np.vstack((self._free_rows(H, H / GRID), self._constant_rows())),
+                                      np.vstack((cl[4][self.fl, 1:], cr[4][self.fr, 1:])))
+        return tables
 
     def _state(self, y: np.ndarray) -> None:
         """The modal state of both buildings (:meth:`ModalBound.modal_state`) and every floor's
@@ -585,54 +630,17 @@ class _LinearPair:
         key = reads.tobytes()
         if key == self._key:
             return
-        bl, br = self.bounds
-        q, qd, b, speed = self.q, self.qd, self._b, self._speed
-        u_l, v_l, u_r, v_r = self._reads_parts
-        q_l, q_r = self._q_parts
-        qd_l, qd_r = self._qd_parts
-        np.matmul(bl.to_modal, u_l, out=q_l)
-        np.matmul(bl.to_modal, v_l, out=qd_l)
-        np.matmul(br.to_modal, u_r, out=q_r)
-        np.matmul(br.to_modal, v_r, out=qd_r)
-        np.multiply(self.zeta_w, q, out=b)
-        b += qd
+        q, qd, speed = self.q, self.qd, self._speed
+        np.matmul(reads, self._to_modal_t, out=self._modal_pair)    # q, q' (qd and b share a place)
         np.multiply(self.w, q, out=speed)
         np.square(speed, out=speed)
         square = self._square
         np.multiply(qd, qd, out=square)
         speed += square
         np.sqrt(speed, out=speed)
-        rate_l, rate_r = self._rate_parts
-        speed_l, speed_r = self._speed_parts
-        np.matmul(bl.abs_phi, speed_l, out=rate_l)
-        np.matmul(br.abs_phi, speed_r, out=rate_r)
-        # each level's rate slack factor: 0.5 (rate_l + rate_r), times dS per horizon (prove)
-        half = self._half_rate[:, 0]
-        np.add(self.rate[self.rows_l], self.rate[self.rows_r], out=half)
-        half *= 0.5
+        np.multiply(self.zeta_w, q, out=square)
+        qd += square                                                # b = q' + zeta w q
         self._key = key
-        self._free = {}
-
-    def _free_floors(self, H: float) -> np.ndarray:
-        """Every floor's free motion over ``H`` (both buildings stacked, floors x points), kept
-        per state (:meth:`_state`) and horizon."""
-        free = self._free.get(H)
-        if free is None:
-            Ac, As, _ = self._tables(H)
-            q, b = self._modal
-            Q = self._Q
-            np.multiply(Ac, q, out=Q)
-            part = self._Q_part
-            np.multiply(As, b, out=part)
-            Q += part
-            (bl, br), nl = self.bounds, self.nl
-            free = np.empty(Q.shape)
-            np.matmul(bl.phi, Q[:nl], out=free[:nl])
-            np.matmul(br.phi, Q[nl:], out=free[nl:])
-            if len(self._free) > 8:         # a few horizons per state
-                self._free.clear()
-            self._free[H] = free
-        return free
 
     def open_throughout(self, y: np.ndarray, H: float, peak: float, forces: dict) -> bool:
         """True when every level's gap provably stays open over all of ``[0, H]`` (s) by the coarse
@@ -655,25 +663,23 @@ class _LinearPair:
         with ``peak`` (m/s^2) at least ``|ag|`` over the horizon.  So in exact arithmetic its
         bound on every interval lies under ``max(d0, d0 + v0 H + a H^2 / 2) + R dS / 2 + P H^2 / 2``."""
         self._state(y)
-        u_l, v_l, u_r, v_r = self._reads_parts
-        rows_l, rows_r = self.rows_l, self._fr_own
-        d0 = u_l[rows_l] - u_r[rows_r]
-        d0 -= self.gap[:, 0]
-        speed_l, speed_r = self._speed_parts
-        accel_l, accel_r = self._coarse_accel
-        free = accel_l @ speed_l
-        free += accel_r @ speed_r
-        free *= 0.5 * H * H
-        free += (v_l[rows_l] - v_r[rows_r]) * H
+        m = self.m
+        diff, rates = self._coarse_reads, self._coarse_rates
+        np.matmul(self._reads, self._coarse_difference, out=diff)     # x_l - x_r, v_l - v_r
+        np.matmul(self._speed, self._coarse_speeds, out=rates)        # a, then R / 2
+        d0 = diff[0] - self.gap[:, 0]
+        free = rates[:m] * (0.5 * H * H)
+        free += diff[1] * H
         free += d0
         bound = _MAX(d0, free, out=free)
-        bound += self._half_rate[:, 0] * (H / GRID)
+        bound += rates[m:] * (H / GRID)
         load = self._coarse_ground * peak
         if forces:
-            for name, modes, floors in ((self.left, self.bounds[0], self.fl), (self.right, self.bounds[1], self.fr)):
+            for name, modes, rows in ((self.left, self.bounds[0], self._coarse_rows[0]),
+                                      (self.right, self.bounds[1], self._coarse_rows[1])):
                 force = forces.get(name)
                 if force is not None and _ANY(force):
-                    load += modes.abs_phi[floors] @ np.abs(modes.phi.T @ force)
+                    load += rows @ np.abs(modes.phi.T @ force)
         load *= 0.5 * H * H
         bound += load
         return bound
@@ -681,23 +687,15 @@ class _LinearPair:
     def prove(self, y: np.ndarray, H: float, ground: np.ndarray, forces: dict, out: list) -> None:
         """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
         self._state(y)
-        ground_rows = self._tables(H)[2]
-        free = self._free_floors(H)
+        modes, ground_rows = self._tables(H)
         dS = H / GRID
-        m = self.m
-        # delta = x_l - x_r - gap; interval k: the free part's largest value <= mean of its ends
-        # + L dS / 2; forced part at its end (as horizons)
-        delta = self._delta
-        np.subtract(free[self.rows_l], free[self.rows_r], out=delta)
-        delta -= self.gap
-        before, after, now = self._delta_ends
-        upper = self._upper
-        np.add(before, after, out=upper)
-        upper *= 0.5
-        upper += self._half_rate * dS
-        # the forced bound of the levels' floors: FloorMotion's ground term (an elementwise
-        # product: the levels' rows alone) plus, with a held force, its modal term (a matrix
-        # product: every floor's, then the levels')
+        # each level's penetration now and, on each interval, the free part's mean of its ends plus
+        # L dS / 2 (its largest value is at most that), less the gap (the state's product)
+        np.multiply(self._shapes, self._s, out=self._weighted)
+        np.matmul(self._weighted, modes, out=self.answer)
+        # the forced bound of the levels' floors at each interval's end: FloorMotion's ground term
+        # (an elementwise product: the levels' rows alone) plus, with a held force, its modal term
+        # (a matrix product: every floor's, then the levels')
         forced = self._forced
         np.multiply(ground_rows, ground[1:], out=forced)
         forced_l, forced_r = self._forced_parts
@@ -707,9 +705,9 @@ class _LinearPair:
                 force = forces.get(name)
                 if force is not None and _ANY(force):
                     part += ((bound.abs_phi * np.abs(bound.phi.T @ force)) @ bound._cached(H)[3])[floors, 1:]
+        upper = self._upper
         upper += forced_l
         upper += forced_r
-        self._answer_now[:] = now
         np.greater_equal(self.answer, 0.0, out=self.bad)
         for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
             if f:                               # f = 0: closed now (0 s)
@@ -731,43 +729,93 @@ class _ExactPair(_LinearPair):
     mean of its ends by at most ``L dS / 2``, ``L`` a bound on its rate: ``|x_f'| <= sum_j |Phi_fj|
     A_j`` with ``A_j = sqrt(w_j^2 q_j^2 + q_j'^2)``, which damping only lowers and the modal load
     raises by at most its integral, so ``A_j(s) <= A_j(0) + |Gamma_j| int_0^s |g_grid| + |phi_j'
-    F| s``.  :data:`EXACT_MARGIN` covers the round-off of the computed motion."""
+    F| s``.  :data:`EXACT_MARGIN` covers the round-off of the computed motion.
+
+    Each level's row of :attr:`answer` (its penetration now, on every grid interval the mean of
+    the ends' known penetration plus the free rate's slack less the gap plus :data:`EXACT_MARGIN`,
+    and a last 1: no interval may close, ``H``) is two small matrix products per proof, with tables
+    made once per horizon (:meth:`_table`).  The ground's response is a convolution: the floor
+    kernels are Toeplitz (the response at point ``k`` to the hat at point ``i >= 1`` depends on
+    ``k - i`` only), so each level's response to ``g`` is ``F @ M`` with ``F`` (levels x lags)
+    its kernel's column and ``M[d, k] = g[k - d]`` a view of ``g`` padded with zeros (a few kB
+    instead of the levels' full kernel, levels x points x points: a proof touches less memory).
+    The first grid value's half hat, the free motion (``q``, ``q' + zeta w q``), the free rates'
+    slack (``|P| A``) and the gap are the state's product, ``(S * s) @ modes`` with ``s = [q, q' +
+    zeta w q, A, g_0, 1]`` and ``S`` the levels' mode shapes (``|P|`` for the rates, one column
+    per level for ``g_0`` and 1).  The terms that vary along the grid with the ground (its
+    integral in the rate bound, the bend's bound) are added to it."""
 
     def __init__(self, gaps: "OpenGaps", left: str, right: str, positions: list, fl: np.ndarray,
                  fr: np.ndarray, gap: np.ndarray):
         super().__init__(gaps, left, right, positions, fl, fr, gap)
         bl, br = self.bounds
         # each level's rate gain per unit of int |g|: (|phi_l| |Gamma_l|)[fl] + (...)[fr], halved
-        # as _half_rate is (the slack is L dS / 2)
+        # as the free rate's slack is (the slack is L dS / 2)
         self._ground_gain = (0.5 * ((bl.abs_phi @ np.abs(bl.gamma))[fl] + (br.abs_phi @ np.abs(br.gamma))[fr]))[:, None]
-        self._exact: dict = {}          # H -> the levels' penetration kernel (levels x points x points)
+        self._exact: dict = {}          # H -> (lags, modes, the ground's rate gain times dS, the bend's rows)
+        m = self.m
+        # the ground on the grid after GRID zeros: M[d, k] = g[k - d] is a view of it (rows d = 0..GRID
+        # start at GRID - d), filled by GroundAhead.on_grid
+        padded = np.zeros(GRID + GRID + 1)
+        self._ground = padded[GRID:]
+        self._toeplitz = np.lib.stride_tricks.sliding_window_view(padded, GRID + 1)[GRID::-1]
+        self._convolved = np.empty((m, GRID + 1))
+        self._g0 = self._s[-m:]         # g_0 once per level (the state's product, _LinearPair)
+        self._intervals = np.empty((m, GRID))
 
-    def _kernel(self, H: float) -> np.ndarray:
-        kernel = self._exact.get(H)
-        if kernel is None:
-            if len(self._exact) > 16:
-                self._exact.pop(next(iter(self._exact)))
-            bl, br = self.bounds
-            kernel = bl.floor_kernels(H)[self.fl] - br.floor_kernels(H)[self.fr]
-            kernel = self._exact[H] = kernel.reshape(self.m * (GRID + 1), GRID + 1)
-        return kernel
+    _half_hat = True
+
+    def _table(self, H: float) -> tuple:
+        """``(lags, modes, gain, bend)`` at horizon ``H`` (class docstring): ``lags`` (levels x
+        lags) the ground's convolution, in the intervals' means (``lags @ M`` at point ``k >= 1``
+        is the mean of the response at ``k - 1`` and ``k``); ``gain`` (levels x 1) times ``int
+        |g|`` the rate bound's ground part, ``bend`` (levels x intervals) times the bend's bound
+        its response's (both buildings' rows summed).  Made once per horizon."""
+        tables = self._exact.get(H)
+        if tables is not None:
+            return tables
+        if len(self._exact) > 16:
+            self._exact.pop(next(iter(self._exact)))
+        bl, br = self.bounds
+        fl, fr, m, p = self.fl, self.fr, self.m, GRID + 1
+        dS = H / GRID
+        slack = dS                      # the rate bound's slack is L dS / 2 (the gains hold the half)
+        cl, cr = bl._cached(H), br._cached(H)
+        # the levels' kernels (levels x points k x grid values i), a hat's response by lag k - i
+        kernels = bl.floor_kernels(H)[fl] - br.floor_kernels(H)[fr]
+        lag = np.zeros((m, p))
+        lag[:, :GRID] = kernels[:, 1:, 1]             # lag d = k - 1 of the hat at i = 1; lag GRID: 0
+        lags = 0.5 * lag
+        lags[:, 1:] += 0.5 * lag[:, :-1]              # the mean of lags d and d - 1: an interval's mean
+        # the first grid value's half hat, less what the convolution gave it (the lag's column)
+        half = _answer_rows(kernels[:, :, 0] - lag)
+        half[:, 0] = kernels[:, 0, 0] - lags[:, 0]    # point 0: the convolution gave it lags[:, 0] g_0
+        # the state's table: each mode's free motion, the rate slack, the constant, g_0 (_LinearPair)
+        modes = np.vstack((self._free_rows(H, slack), self._constant_rows(EXACT_MARGIN), half))
+        # the bend's response: each building's bound of the whole ground's, levels' rows summed
+        bend = cl[4][fl, 1:] + cr[4][fr, 1:]
+        tables = self._exact[H] = (lags, modes, self._ground_gain * slack, bend)
+        return tables
 
     def prove(self, y: np.ndarray, H: float, ground: "GroundAhead", forces: dict, out: list) -> None:
         """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`)."""
         self._state(y)
-        residual_rows = self._tables(H)[2]
-        free = self._free_floors(H)
-        g, rest, integral = ground.on_grid()
-        m = self.m
-        delta = (self._kernel(H) @ g).reshape(m, GRID + 1)
-        delta += free[self.rows_l]
-        delta -= free[self.rows_r]
-        delta -= self.gap
+        lags, modes, gain, bend = self._table(H)
+        g, rest, integral = ground.on_grid(self._ground)
+        self._g0[:] = g[0]
+        np.multiply(self._shapes, self._s, out=self._weighted)
+        np.matmul(self._weighted, modes, out=self.answer)
+        convolved = self._convolved
+        np.matmul(lags, self._toeplitz, out=convolved)
+        self.answer[:, :-1] += convolved
+        upper = self._upper
+        # what the ground adds to the rate bound by each interval's end, and the bend's response
+        extra = self._intervals
+        np.multiply(gain, integral[1:], out=extra)
+        upper += extra
+        np.multiply(bend, rest[1:], out=extra)
+        upper += extra
         dS = H / GRID
-        # the rate bound on each interval, halved: free part, then what the ground can add by the
-        # interval's end
-        half = self._ground_gain * integral[1:]
-        half += self._half_rate
         if forces:
             (bl, br) = self.bounds
             s = _grid(H)
@@ -778,16 +826,15 @@ class _ExactPair(_LinearPair):
                 load = bound.phi.T @ force                       # modal load (held)
                 step = bound.step_response(H)                     # modes x points
                 moved = bound.phi[floors] @ (step * load[:, None])
-                delta += moved if sign > 0.0 else -moved
-                half += (0.5 * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]
-        upper = delta[:, :-1] + delta[:, 1:]
-        upper *= 0.5
-        half *= dS
-        upper += half
-        upper += residual_rows[:m] * rest[1:]
-        upper += residual_rows[m:] * rest[1:]
-        upper += EXACT_MARGIN
-        _answer(upper, delta[:, 0], self.positions, out, dS, H, H, closed=0.0)
+                moved *= sign
+                self._answer_now[:] += moved[:, 0]
+                upper += 0.5 * (moved[:, :-1] + moved[:, 1:])
+                upper += (0.5 * dS * (bound.abs_phi[floors] @ np.abs(load)))[:, None] * s[1:]
+        # the first entry >= 0: 0 closed now, 1..GRID the first interval that may close, GRID + 1
+        # the last 1 (none)
+        np.greater_equal(self.answer, 0.0, out=self.bad)
+        for pos, f in zip(self.positions, self.bad.argmax(axis=1).tolist()):
+            out[pos] = 0.0 if not f else min(H, float(f - 1) * dS) if f <= GRID else H
 
 
 class _BilinearPair:
@@ -1188,14 +1235,17 @@ class GroundAhead:
         hi = int(times.searchsorted(self.t0 + self.H, "left")) + 1
         return float(_MAX.reduce(np.abs(self.values[lo:hi])))
 
-    def on_grid(self) -> tuple[np.ndarray, np.ndarray]:
+    def on_grid(self, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(g, rest, integral)``: the ground acceleration at the grid points ``t0 + s_k``
         (m/s^2), ``max |ag - g_grid|`` over ``[t0, t0 + s_k]`` (m/s^2), ``g_grid`` the polyline
         through ``g``, and a bound on ``int_0^s_k |g_grid|`` (m/s).  What lies between them is the polyline's bend at the knots inside a grid
-        interval, largest at a knot, widened by :data:`GROUND_ROUNDOFF` of the largest ``|g|``."""
+        interval, largest at a knot, widened by :data:`GROUND_ROUNDOFF` of the largest ``|g|``.
+        ``out``: where ``g`` is written too (GRID + 1 values)."""
         times, values, t0 = self.times, self.values, self.t0
         s = t0 + _grid(self.H)
         g = _interp(s, times, values)
+        if out is not None:
+            out[:] = g
         lo = times.searchsorted(s[0], "right")
         hi = times.searchsorted(s[-1], "left")
         if hi > lo:
@@ -1471,9 +1521,9 @@ class OpenGaps:
 
     def _linear_horizons(self, y: np.ndarray, H: float, ground, forces: dict,
                          which: Sequence[int] | None) -> list[float]:
-        """:meth:`horizons` when every building is linear (:class:`_LinearPair`): the same
-        operations in the same order as :meth:`horizons` and :class:`FloorMotion`, so the same
-        horizons to the last bit."""
+        """:meth:`horizons` when every building is linear (:class:`_LinearPair`): the same bounds
+        as :meth:`horizons` and :class:`FloorMotion` in fewer calls (round-off aside: the same
+        horizons, tests/test_gap_bound_fast.py)."""
         exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
         plan = self._linear_plan(which, exact)
         out = [0.0] * sum(len(p.positions) for p in plan)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Container
 
 import numpy as np
 
@@ -242,8 +242,9 @@ class StabilityGuard:
         # per contact: impacts seen, internal steps and communication steps since the latest onset,
         # and when it began (s)
         self._impacts = [0] * len(self.levels)
+        self._total_impacts = 0                       # sum of _impacts
         self._substeps = [0] * len(self.levels)
-        self._steps_since = [0] * len(self.levels)
+        self._since = [0] * len(self.levels)          # steps before the one of the latest onset
         self._onset = [0.0] * len(self.levels)
         self._touching = [False] * len(self.levels)   # in contact after the previous step
 
@@ -266,9 +267,18 @@ class StabilityGuard:
         """Deepest credible penetration of each contact now (m)."""
         return list(self._limits)
 
-    def problem(self, t: float, h: float) -> InstabilityError | None:
-        """The first problem found after the step that ended at ``t`` (step ``h``), or None."""
+    def problem(self, t: float, h: float, asleep: Container[str] = ()) -> InstabilityError | None:
+        """The first problem found after the step that ended at ``t`` (step ``h``), or None.
+
+        ``asleep``: contacts not called since before the step (:mod:`cosim.master.dormancy`), passed
+        over: each fell asleep proven open (``F = 0``, ``delta < 0``: nothing to sample, no
+        internal step) with the outputs this guard checked after the step before, and they have
+        not changed since; every limit they are checked against only loosens as ``E_avail``
+        grows (the penetration limit, the energy tolerance), so their checks hold as they did.
+        Every contact is checked after the first step (none has been checked awake before)."""
         self.steps += 1
+        if self.steps == 1:
+            asleep = ()
         y = self.system.y
         if not math.isfinite(_SUM(y)):      # one reduction; a non-finite entry makes the sum non-finite
             bad = self.system.columns[int(np.flatnonzero(~np.isfinite(y))[0])] if not np.isfinite(y).all() \
@@ -284,6 +294,8 @@ class StabilityGuard:
             self._update_limits()
         tol = self.energy_tol * self.E_avail + 1e-9
         for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
+            if lv.name in asleep:
+                continue
             delta = item(lv.i_delta)
             if delta > limit:
                 return InstabilityError(
@@ -317,11 +329,11 @@ class StabilityGuard:
             return InstabilityError(
                 f"t = {t:.6g} s: the buildings hold {mech:.3g} J, more than the {self.E_avail:.3g} J ever put "
                 f"in: {self._advice(lv, h)}", t, lv.name if lv else "", "energy")
-        return self._work(t, h)
+        return self._work(t, h, asleep)
 
     # -- work ------------------------------------------------------------------------------------
-    def _work(self, t: float, h: float) -> InstabilityError | None:
-        """Work that explodes (see the class docstring), or None."""
+    def _work(self, t: float, h: float, asleep: Container[str] = ()) -> InstabilityError | None:
+        """Work that explodes (see the class docstring), or None (``asleep`` as :meth:`problem`)."""
         if self.max_steps is not None and self.steps > self.max_steps:
             return InstabilityError(
                 f"t = {t:.6g} s: the run has taken {self.steps:,} communication steps, more than the limit of "
@@ -330,16 +342,16 @@ class StabilityGuard:
                 f"purpose, or lengthen the step", t, "", "work")
         ints = self.system.ints
         item = self.system.y.item
-        total_impacts = 0
+        total_impacts = self._total_impacts
         for i, lv in enumerate(self.levels):
-            if lv.j_impacts < 0:
+            if lv.j_impacts < 0 or lv.name in asleep:
                 continue
             impacts = ints.item(lv.j_impacts)
-            total_impacts += impacts
             if impacts != self._impacts[i]:       # a new impact began in this step
+                total_impacts += impacts - self._impacts[i]
                 self._impacts[i] = impacts
                 self._substeps[i] = 0
-                self._steps_since[i] = 0
+                self._since[i] = self.steps - 1
                 self._onset[i] = t
             if lv.j_substeps < 0:
                 continue
@@ -351,14 +363,16 @@ class StabilityGuard:
             if touching or self._touching[i]:
                 self._substeps[i] += ints.item(lv.j_substeps)
             self._touching[i] = touching
-            self._steps_since[i] += 1
-            allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * self._steps_since[i]
+            steps_since = self.steps - self._since[i]     # communication steps since the onset's
+            allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * steps_since
             if self._substeps[i] > allowed:
+                self._total_impacts = total_impacts
                 return InstabilityError(
                     f"{lv.name}: t = {t:.6g} s: the contact FMU has taken {self._substeps[i]:,} internal steps in "
-                    f"{self._steps_since[i]} communication steps since its impact at t = {self._onset[i]:.6g} s "
+                    f"{steps_since} communication steps since its impact at t = {self._onset[i]:.6g} s "
                     f"(limit {MAX_SUBSTEPS_PER_IMPACT:,} + {SUBSTEPS_PER_STEP} per step; a resolved impact takes "
                     f"40-90): {self._stuck(lv)}", t, lv.name, "work")
+        self._total_impacts = total_impacts
         refined = self.steps - t / self.base_step
         if self.levels:
             per_impact = MAX_REFINED_STEPS_PER_IMPACT[self._resolved]
@@ -433,8 +447,8 @@ class StabilityGuard:
             f"{level.name}: t = {t:.6g} s: a step of {ratio:.2g} impact time scales would leave the dissipated "
             f"energy off by about {min(ratio, 1.0):.0%}: {self._advice(level, h)}", t, level.name, "resolution")
 
-    def check(self, t: float, h: float) -> None:
-        error = self.problem(t, h)
+    def check(self, t: float, h: float, asleep: Container[str] = ()) -> None:
+        error = self.problem(t, h, asleep)
         if error is not None:
             raise error
 

@@ -24,7 +24,7 @@ and keeps:
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Iterable, Sequence
+from typing import TYPE_CHECKING, Container, Iterable, Sequence
 
 import numpy as np
 
@@ -218,8 +218,13 @@ class Recorder:
             port.get()
 
     # -- every step ------------------------------------------------------------------------------------
-    def track(self, t_start: float, t_end: float) -> None:
-        """Peaks and impact onsets of the step ``[t_start, t_end]`` that was just accepted."""
+    def track(self, t_start: float, t_end: float, asleep: Container[str] = ()) -> None:
+        """Peaks and impact onsets of the step ``[t_start, t_end]`` that was just accepted.
+
+        ``asleep``: contacts not called since before the step (:mod:`cosim.master.dormancy`).  A
+        contact falls asleep only with nothing to do (no force, the gap open) at a step's start, as
+        this read after the step before: inactive then and since, its counters unchanged, so it
+        is passed over."""
         y = self.system.y
         if self._peak_index.size:
             now = y[self._peak_index]
@@ -233,6 +238,8 @@ class Recorder:
         was_active = self._active
         for node, i_impacts, i_F, i_delta in self._contacts:
             name = node.spec.name
+            if name in asleep:
+                continue
             active = item(i_F) != 0.0 or item(i_delta) >= 0.0
             if active or was_active[name]:
                 ints = node.integers.get()

@@ -136,10 +136,13 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
             t_start = solver.t
             plan.rows = True                   # a strategy that does not say where it steps reads all
             solver.step()
-            recorder.track(t_start, solver.t)  # first: it reads the counters the guard checks
+            # the contacts asleep through the step: not called, their outputs as they were (the
+            # recorder and the guard pass over them)
+            asleep = solver.sleeping()
+            recorder.track(t_start, solver.t, asleep)  # first: it reads the counters the guard checks
             windows.track(t_start, solver.t)
             if guard is not None:
-                guard.check(solver.t, getattr(solver, "h_last", solver.h))
+                guard.check(solver.t, getattr(solver, "h_last", solver.h), asleep)
             if plan.rows and recorder.due(solver.t):
                 recorder.read_ints()
                 recorder.record(solver.t)

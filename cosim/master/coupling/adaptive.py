@@ -51,6 +51,7 @@ guard's view.
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING
 
@@ -342,10 +343,12 @@ class Adaptive(CouplingStrategy):
 
     def _plan(self) -> tuple[float, bool]:
         """``(h_target, closures)``: the longest safe step (s) and, for each gap that may close,
-        ``(s*, h_keep)``: the earliest closure (s) and the longest step (s) accepted whatever
-        closes in it (no state to save for it), from each level's kinematics now
+        ``(s*, h_keep)``: the earliest closure (s) and a function of no argument giving the
+        longest step (s) accepted whatever closes in it (no state to save for it; evaluated by
+        :meth:`step` only for a closure within its risk), from each level's kinematics now
         (``_kinematics``, read by :meth:`step`).  A closure later than ``_far`` is left out: it
-        could change neither."""
+        could change neither.  A time scale costs a few contact-law evaluations: each is
+        computed only where it can change the answer."""
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
@@ -362,12 +365,14 @@ class Adaptive(CouplingStrategy):
             s = closure_time(d, dd, A)
             if s <= far:
                 v_closing = max(dd, 0.0) + A * s                    # fastest possible approach at closure
-                h_contact = lv.in_contact_scale(0.0, v_closing, v_closing, self.contact_fraction)
-                h_target = min(h_target, max(s, h_contact))
+                if s < h_target:                # else max(s, h_contact) >= h_target: no change
+                    h_contact = lv.in_contact_scale(0.0, v_closing, v_closing, self.contact_fraction)
+                    h_target = min(h_target, max(s, h_contact))
                 # a step no longer than the closing step at SAVE_SPEED_MARGIN times that speed is
                 # accepted even if the gap closes in it (_retry_step): no rollback can follow it
                 v_save = SAVE_SPEED_MARGIN * v_closing
-                closures.append((s, lv.in_contact_scale(0.0, v_save, v_save, self.contact_fraction)))
+                closures.append((s, functools.partial(lv.in_contact_scale, 0.0, v_save, v_save,
+                                                      self.contact_fraction)))
         return h_target, closures
 
     # -- the proof that gaps stay open ---------------------------------------------------------------
@@ -450,7 +455,7 @@ class Adaptive(CouplingStrategy):
             h = t_next - t
             # a long step (level < 0) is proven free of closures; a step that _retry_step would
             # accept whatever closes in it needs no saved state
-            risky = 0 <= level < self.max_halvings and any(s < self.risk_factor * h and h > h_keep * (1.0 + 1e-9)
+            risky = 0 <= level < self.max_halvings and any(s < self.risk_factor * h and h > h_keep() * (1.0 + 1e-9)
                                                           for s, h_keep in closures)
             if risky and saved is None:
                 saved = self._save()
@@ -576,6 +581,10 @@ class Adaptive(CouplingStrategy):
                     vec = forces[b] = np.zeros(self._gaps.buildings[b][0].n)
                 vec[f] += sign * F
         return forces
+
+    def sleeping(self):
+        """The sleeping contacts (:mod:`cosim.master.dormancy`), by name."""
+        return self._dormancy.sleeping if self._dormancy is not None else ()
 
     def finish(self) -> None:
         if self._dormancy is not None:

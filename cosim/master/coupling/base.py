@@ -38,7 +38,7 @@ contact impulse of [t-h, t]: one step of delay, first-order accurate.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Container
 
 if TYPE_CHECKING:
     from ..system import System
@@ -87,6 +87,11 @@ class CouplingStrategy:
 
     def finish(self) -> None:
         """Bring every instance to the end time (a strategy that skips calls catches up here)."""
+
+    def sleeping(self) -> Container[str]:
+        """The contact instances (names) not called since before the last accepted step (asleep,
+        :mod:`cosim.master.dormancy`): their outputs are those they had at its start.  None here."""
+        return ()
 
     def _before(self, t_next: float) -> None:
         if self.on_step is not None:
