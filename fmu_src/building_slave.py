@@ -53,6 +53,15 @@ from .shear_building import DAMPING_MODELS, ModalZohPropagator, ShearBuilding, Z
 N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64          # step matrices by canonical step length
 _MAX_STEP_ALIASES = 256         # exact step lengths remembered to their canonical one
+# Up to this many storeys a zero-order-hold step length gets its matrices at its first step (no
+# step without matrices, _zoh_entry).  Measured (CPU, loaded, El Centro-like lengths): matrices M,
+# a step without them U, a step with them s, us:  n = 1: 99 / 72 / 8;  4: 109 / 86 / 9;
+# 5: 123 / 89 / 9;  8: 151 / 96 / 10;  15: 278 / 106 / 16.  Building at once loses M + s - U on a
+# length stepped once (31 us at n = 4) and saves U - s on every length stepped again (78 us):
+# up to 4 storeys the saving is over twice the loss, so it pays unless two lengths in three are
+# stepped once (free_vibration: 7 lengths per building, each stepped 5 times or more; a record's
+# tail: a few lengths once each).  Taller buildings keep the first step without matrices.
+_EAGER_MATRIX_STOREYS = 4
 # Parameter bounds: generous beyond any building (a storey of the tallest tower is ~1e7 kg and
 # 1e10 N/m, periods stay below 10 s), and tight enough that the eigenproblem and the matrix
 # exponential stay in double precision: m = 1e-300 kg made LAPACK fail, m = 1e300 kg and
@@ -274,6 +283,8 @@ class Building(Fmi2Slave):
         # building's steps measured no cheaper that way: they publish through the integrator, and
         # the steps that may yield paid for the product before taking the general path)
         self._ramps = self._legacy and not self._free_mass
+        # small buildings build a length's matrices at its first step (_EAGER_MATRIX_STOREYS)
+        self._eager_matrices = n <= _EAGER_MATRIX_STOREYS
         self._n = n
         self._state = state
         self._derived_cache = None
@@ -354,14 +365,16 @@ class Building(Fmi2Slave):
         run steps once (the tail of a record: 0.02 to 0.16 s, one step each) would cost more to
         build (the closed-form step matrix with its damping form's quadrature, and the rows of the
         in-step peak search) than its step; from its second step on, the matrices pay.  Which
-        lengths were stepped is part of the FMU state, so a restored state takes the same paths."""
+        lengths were stepped is part of the FMU state, so a restored state takes the same paths.
+        A small building (up to _EAGER_MATRIX_STOREYS storeys, where the matrices cost little more
+        than a step without them) builds them at the first step: never None."""
         entry = self._step_aliases.get(step_size)
         if entry is None:
             # a free mass (one storey, k = 0: its matrices cost nothing) keeps the matrix of the
             # exact length, bit for bit as before: its runs in tests/test_hard_cases.py decide
             # a first-order rebound by where the adaptive steps land, which round-off moves
             key = step_size if self._free_mass else canonical_length(step_size)
-            if key not in self._stepped_lengths and self._unmapped_fits(key):
+            if not self._eager_matrices and key not in self._stepped_lengths and self._unmapped_fits(key):
                 self._stepped(key)
                 return None
             entry = self._steps.get(key)
@@ -370,7 +383,7 @@ class Building(Fmi2Slave):
             if len(self._step_aliases) >= _MAX_STEP_ALIASES:
                 self._step_aliases.clear()
             self._step_aliases[step_size] = entry
-        elif entry[2] not in self._stepped_lengths and self._unmapped_fits(entry[2]):
+        elif not self._eager_matrices and entry[2] not in self._stepped_lengths and self._unmapped_fits(entry[2]):
             self._stepped(entry[2])      # a state restored from before the first step of this length
             return None
         return entry

@@ -5,7 +5,8 @@ long way gives.
   (``linear_response.canonical_length``), and nothing else does;
 * the first zero-order-hold step of a length, taken from the modal solution without matrices
   (``ExactPiecewiseLinear.advance_unmapped``), equals the matrix step to round-off, state,
-  energies and in-step peaks;
+  energies and in-step peaks; a building of up to ``_EAGER_MATRIX_STOREYS`` storeys builds the
+  matrices at the first step instead (they cost little more than a step without them there);
 * the in-step peak tests of a knot step's intervals run together
   (``ExactPiecewiseLinear._interval_peaks``) with the decisions of one ``_peaks`` per interval:
   the same running peaks and the same deferred searches, bit for bit.
@@ -19,7 +20,7 @@ import pytest
 
 from fmu_src import building_response
 from fmu_src.building_response import integrator_for
-from fmu_src.building_slave import Building
+from fmu_src.building_slave import _EAGER_MATRIX_STOREYS, Building
 from fmu_src.ground_records import load_record
 from fmu_src.hysteresis import StoreyHysteresis
 from fmu_src.linear_response import LENGTH_DIGITS, Scan, canonical_length
@@ -145,10 +146,29 @@ def test_the_modal_step_without_matrices_equals_the_modal_maps(h):
     np.testing.assert_allclose(a.peaks, m.peaks, rtol=1e-9)     # PEAK_RTOL of the searches
 
 
+def test_a_small_building_builds_a_lengths_matrices_at_its_first_step():
+    """Up to _EAGER_MATRIX_STOREYS storeys the first step of a length is a matrix step (building
+    the matrices at once costs less than the step without them saves when the length is stepped
+    again, free_vibration's case, and little when it is not: a record's tail); taller buildings
+    take it without matrices (the last test: a length stepped once costs no matrices)."""
+    rec = el_centro()
+    for n, eager in ((1, True), (_EAGER_MATRIX_STOREYS, True), (_EAGER_MATRIX_STOREYS + 1, False)):
+        b = slave(n, 0.5)
+        t = 0.0
+        for h in (0.01, 0.02, 0.013):
+            b.ag = rec.mean_over(t, t + h)
+            assert b.do_step(t, h), b._error
+            t += h
+            # a matrix step builds (or finds) the length's matrices; a step without them builds none
+            assert (canonical_length(h) in b._steps) == eager, (n, h)
+        assert b.cost.segments == (0 if eager else 3)       # steps without matrices count segments
+
+
 def test_a_restored_state_takes_the_same_paths():
     """The stepped lengths are FMU state: a run restored to before the first step of a length
-    takes it without matrices again, and replays bit for bit."""
-    b = slave(3, 0.5)
+    takes it without matrices again, and replays bit for bit (a building above
+    _EAGER_MATRIX_STOREYS: smaller ones build the matrices at the first step)."""
+    b = slave(_EAGER_MATRIX_STOREYS + 1, 0.5)
     rec = el_centro()
     for i in range(20):
         b.ag = rec.mean_over(0.01 * i, 0.01 * (i + 1))
@@ -163,7 +183,7 @@ def test_a_restored_state_takes_the_same_paths():
             step = 0.005 if i % 2 else 0.02
             b.ag = rec.mean_over(t, t + step)
             assert b.do_step(t, step)
-            out.append(np.concatenate([b.x[:3], b.a[:3], [b.E_damping, b.E_input]]))
+            out.append(np.concatenate([b.x[:5], b.a[:5], [b.E_damping, b.E_input]]))
             t += step
         runs.append(np.array(out))
         assert canonical_length(0.005) in b._stepped_lengths
