@@ -117,7 +117,8 @@ BOUC_WEN_Z_MARGIN = 1e-4
 #: to 10 s at 20 % damping (1.6e-10 m, tests/test_gap_bound_fuzz.py). The ramp's closed form loses
 #: digits as zeta / w^3: 3e-9 m at T = 30 s, 1.5e-7 m at T1_MAX = 100 s (measured), above this
 #: margin but ~1e3 times below the rate slack every proof adds (mm), which is what keeps such
-#: slow buildings' proofs sound; a building's periods are bounded by building.fmu's T1_MAX
+#: slow buildings' proofs sound up to T1_MAX. Periods set through small stiffnesses (T1 = 0) are not
+#: bounded: far beyond 100 s this margin would want to scale with the slowest mode (known limit)
 EXACT_MARGIN = 1e-9
 #: absolute slack (m) below zero that the coarse bound of a level's penetration over a whole horizon
 #: (:meth:`_LinearPair.open_throughout`) must keep before the proof on the grid is skipped: that
