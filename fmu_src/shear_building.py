@@ -456,21 +456,33 @@ class ModalZohPropagator:
             raise ValueError(f"a step of {h!r} s spans {chunks} quadrature chunks of the fastest mode; "
                              f"the limit is {MAX_ZOH_CHUNKS}")
         width = h / chunks
-        nodes = ((width * np.arange(chunks))[:, None] + width * 0.5 * (_GX + 1.0)[None, :]).ravel()
-        weights = np.tile(width * 0.5 * _GW, chunks)
+        half = 0.5 * width
         # the end of the step and the nodes, every mode at once: (n, 1 + K)
-        times = np.concatenate(([h], nodes))[None, :]
-        x_q, x_v, v_q, v_v = _oscillator_functions(omega[:, None], sigma[:, None], times)
-        g = x_v[:, 1:] @ weights                                  # int_0^h g'(t) dt
+        times = np.empty(1 + chunks * _ZOH_GAUSS_POINTS)
+        times[0] = h
+        if chunks == 1:               # (most steps: no tiling of the nodes over chunks)
+            times[1:] = half * (_GX + 1.0)
+            weights = half * _GW
+        else:
+            times[1:] = ((width * np.arange(chunks))[:, None] + half * (_GX + 1.0)[None, :]).ravel()
+            weights = np.tile(half * _GW, chunks)
+        x_q, x_v, v_q, v_v = _oscillator_functions(omega[:, None], sigma[:, None], times[None, :])
         size = 3 * n + 1
-        # q(h) = x_q q0 + x_v q0' + g P; q'(h) = v_q q0 + v_v q0' + g'(h) P
-        end_q = np.stack([x_q[:, 0], x_v[:, 0], g], axis=1)       # (n, 3)
-        end_v = np.stack([v_q[:, 0], v_v[:, 0], x_v[:, 0]], axis=1)
-        step = np.empty((2 * n, size))
-        step[:n] = phi @ np.einsum("ja,jas->js", end_q, T)
-        step[n:] = phi @ np.einsum("ja,jas->js", end_v, T)
+        # q(h) = x_q q0 + x_v q0' + g P; q'(h) = v_q q0 + v_v q0' + g'(h) P, with g = int_0^h g'(t)
+        # dt: one (2, n, 3) array of both ends' coefficients, one product for both halves of the step
+        ends = np.empty((2, n, 3))
+        ends[0, :, 0] = x_q[:, 0]
+        ends[0, :, 1] = x_v[:, 0]
+        ends[0, :, 2] = x_v[:, 1:] @ weights
+        ends[1, :, 0] = v_q[:, 0]
+        ends[1, :, 1] = v_v[:, 0]
+        ends[1, :, 2] = x_v[:, 0]
+        step = (phi @ np.einsum("kja,jas->kjs", ends, T)).reshape(2 * n, size)
         # int q_j'^2 = [q0, q0', P] G_j [q0, q0', P]' with G_j = sum_k w_k r_k r_k', r = (v_q, v_v, g')
-        rows = np.stack([v_q[:, 1:], v_v[:, 1:], x_v[:, 1:]], axis=1)          # (n, 3, K)
+        rows = np.empty((n, 3, times.size - 1))
+        rows[:, 0] = v_q[:, 1:]
+        rows[:, 1] = v_v[:, 1:]
+        rows[:, 2] = x_v[:, 1:]
         gram = np.einsum("jak,jbk,k->jab", rows, rows, weights) * (2.0 * sigma)[:, None, None]
         form = T.reshape(3 * n, size).T @ np.einsum("jab,jbs->jas", gram, T).reshape(3 * n, size)
         self.damping_form = 0.5 * (form + form.T)
