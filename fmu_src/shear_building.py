@@ -378,8 +378,14 @@ def _oscillator_functions(omega: np.ndarray, sigma: np.ndarray, t: np.ndarray):
     wd = np.sqrt(np.abs(d2))
     decay = np.exp(-sigma * t)
     arg = wd * t
+    under = d2 > 0.0
+    if under.all():
+        # every mode under-damped (every building of the bundled scenes): the first regime alone,
+        # the same values as the general path below without its selections
+        es = decay * (np.sin(arg) / wd)
+        ec = decay * np.cos(arg)
+        return ec + sigma * es, es, -w2 * es, ec - sigma * es
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        under = d2 > 0.0
         c = np.where(under, np.cos(arg), np.cosh(np.minimum(arg, 1.0)))
         s = np.where(wd > 0.0, np.where(under, np.sin(arg), np.sinh(np.minimum(arg, 1.0))) / wd, t)
         es = decay * s                           # e^{-sigma t} s(t): the impulse response
