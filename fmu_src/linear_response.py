@@ -388,7 +388,7 @@ class Configuration:
         self.peak_modal_abs = np.abs(self.peak_modal)
         self._maps: OrderedDict[float, SegmentMap] = OrderedDict()
         self._exact: dict[float, SegmentMap] = {}      # the same maps by the exact length asked
-        self._watch_modal_abs = None                    # |watch_rows V| (change_bounds)
+        self._watch_modal_abs = None                    # |watch_rows V| and 2 / |lam| (change_bounds)
         self._scan_start = None                         # scan_rows' length-independent rows
         self.max_maps = int(max_maps)
         self.maps_built = 0          # cost counter
@@ -542,16 +542,21 @@ class Configuration:
         work: a segment whose bound leaves every function inside its limits cannot have an
         event or a new peak.
         """
-        FV = self._watch_modal_abs
-        if FV is None:       # whatever the length: made once per configuration
-            FV = self._watch_modal_abs = np.abs(self.watch_rows @ self.V)       # (4n, 2n)
-        with np.errstate(divide="ignore"):
-            reach = np.minimum(length, np.where(self.lam_abs > 0.0, 2.0 / self.lam_abs, np.inf))
+        parts = self._watch_modal_abs
+        if parts is None:       # whatever the length: made once per configuration
+            with np.errstate(divide="ignore"):
+                limit = np.where(self.lam_abs > 0.0, 2.0 / self.lam_abs, np.inf)     # 2 / |lam|
+            parts = self._watch_modal_abs = (np.abs(self.watch_rows @ self.V), limit)  # (4n, 2n)
+        FV, limit = parts
         growth = math.exp(self.growth_rate * length)
-        change = FV * (reach * growth)[None, :]
+        scale = np.minimum(length, limit) * growth
         ramp_change = FV @ (0.5 * length * length * growth * self.ramp_abs)
         # acting on [|Re q'(0)|; |Im q'(0)|] (their sum bounds |q'(0)|): no square root per step
-        return np.ascontiguousarray(np.hstack([change, change])), ramp_change
+        half = FV.shape[1]
+        change = np.empty((FV.shape[0], 2 * half))
+        np.multiply(FV, scale[None, :], out=change[:, :half])
+        change[:, half:] = change[:, :half]
+        return change, ramp_change
 
     def taylor_powers(self, degree: int) -> tuple:
         """:func:`_taylor_powers` of this configuration's eigenvalues, made once per degree (a
