@@ -54,14 +54,15 @@ N_MAX = 20  # build-time storey capacity
 _MAX_CACHED_STEPS = 64          # step matrices by canonical step length
 _MAX_STEP_ALIASES = 256         # exact step lengths remembered to their canonical one
 # Up to this many storeys a zero-order-hold step length gets its matrices at its first step (no
-# step without matrices, _zoh_entry).  Measured (CPU, loaded, El Centro-like lengths): matrices M,
-# a step without them U, a step with them s, us:  n = 1: 99 / 72 / 8;  4: 109 / 86 / 9;
-# 5: 123 / 89 / 9;  8: 151 / 96 / 10;  15: 278 / 106 / 16.  Building at once loses M + s - U on a
-# length stepped once (31 us at n = 4) and saves U - s on every length stepped again (78 us):
-# up to 4 storeys the saving is over twice the loss, so it pays unless two lengths in three are
-# stepped once (free_vibration: 7 lengths per building, each stepped 5 times or more; a record's
-# tail: a few lengths once each).  Taller buildings keep the first step without matrices.
-_EAGER_MATRIX_STOREYS = 4
+# step without matrices, _zoh_entry).  Measured (CPU, loaded, lengths near 10 ms): matrices M, a
+# step without them U, a step with them s, us:  n = 1: 68 / 82 / 8;  4: 73 / 91 / 8;  5: 86 / 92 / 9;
+# 8: 104 / 97 / 10;  10: 123 / 98 / 11;  15: 235 / 109 / 17.  Building at once loses M + s - U on
+# a length stepped once (nothing up to 4 storeys, 17 us at 8, 36 at 10) and saves U - s on every
+# length stepped again (75-87 us): up to 10 storeys the saving is over twice the loss, so it pays
+# unless two lengths in three are stepped once (free_vibration: 7 lengths per building, each
+# stepped 5 times or more; a record's tail: a few lengths once each).  Taller buildings keep the
+# first step without matrices (15 storeys: the loss 144 us, the saving 92).
+_EAGER_MATRIX_STOREYS = 10
 # Parameter bounds: generous beyond any building (a storey of the tallest tower is ~1e7 kg and
 # 1e10 N/m, periods stay below 10 s), and tight enough that the eigenproblem and the matrix
 # exponential stay in double precision: m = 1e-300 kg made LAPACK fail, m = 1e300 kg and
