@@ -220,6 +220,8 @@ class ModalBound:
             if not impulse_only:
                 Ac[under] = decay * np.cos(wd * s)
             As[under] = decay * np.sin(wd * s) / wd
+        if under.size == self.n:                   # every mode underdamped: nothing left below
+            return Ac, As
         for j in range(self.n):
             wj, zj = self.w[j], self.zeta[j]
             if wj > 0.0 and zj < 1.0:
@@ -1323,6 +1325,13 @@ def floor_forces(n: int, contributions: Sequence[tuple[int, float]]) -> np.ndarr
     return f if np.any(f) else None
 
 
+class _Plan(list):
+    """The pairs of one grouping of levels (:meth:`OpenGaps._linear_plan`) and how many horizons
+    they answer (counted once, not at every proof)."""
+
+    answers = 0
+
+
 class OpenGaps:
     """Every contact level of a system with what proves its gap open (module docstring):
     each building's :class:`ModalBound` and where its floors' states live in ``System.y``.
@@ -1536,10 +1545,11 @@ class OpenGaps:
         plan = self._plans.get(key)
         if plan is not None:
             return plan
-        plan = []
+        plan = _Plan()
         for pair in self._pairs(which):
             stiff = exact and all(np.all(self.buildings[b][0].w > 0.0) for b in pair[:2])
             plan.append((_ExactPair if stiff else _LinearPair)(self, *pair))
+        plan.answers = sum(len(p.positions) for p in plan)
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
@@ -1565,7 +1575,7 @@ class OpenGaps:
         horizons, tests/test_gap_bound_fast.py)."""
         exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
         plan = self._linear_plan(which, exact)
-        out = [0.0] * sum(len(p.positions) for p in plan)
+        out = [0.0] * plan.answers
         bound = peak = None
         # the coarse bound (_LinearPair.open_throughout) is tried on the levels of sleeping contacts
         # while others are awake (a proper subset): those lie away from the contacts and mostly pass
