@@ -283,3 +283,23 @@ def test_exact_proof_of_yielding_buildings_is_a_proof(alpha):
                 cases += 1
                 longer += proven > bounded
     assert cases and longer >= cases / 2, (longer, cases)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_floor_kernel_columns_are_the_full_kernels_columns(seed):
+    """What _ExactPair takes without the full kernels: the floor kernels' columns 0 (the first grid
+    value's half hat) and 1 (the hat at point 1), and by the Toeplitz structure every later hat's
+    column is column 1 shifted by its lag (the structure _ExactPair's convolution relies on)."""
+    rng = np.random.default_rng(seed)
+    b = building(rng, int(rng.integers(1, 6)))
+    bound = ModalBound(b)
+    H = float(rng.choice([0.05, 0.33]))
+    full = bound.floor_kernels(H)
+    first, second = bound.floor_kernel_columns(H)
+    scale = np.abs(full).max()
+    # round-off only: the same products summed by another blocking of the matrix product
+    np.testing.assert_allclose(first, full[:, :, 0], rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(second, full[:, :, 1], rtol=0, atol=1e-13 * scale)
+    for i in (2, GRID // 2, GRID):
+        np.testing.assert_allclose(full[:, i:, i], second[:, 1:GRID + 2 - i], rtol=0, atol=1e-13 * scale)
+        assert not full[:, :i, i].any()             # before the hat: nothing

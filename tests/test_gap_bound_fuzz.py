@@ -467,8 +467,8 @@ MUTATIONS = {
     # _ExactPair: the ground's response (the convolution on the grid) left out
     "exact: no ground response": ("        self.answer[:, :-1] += convolved\n", ""),
     # _ExactPair: the convolution one lag late (the response to the ground a grid interval behind)
-    "exact: ground response a lag late": ("        lag[:, :GRID] = kernels[:, 1:, 1]",
-                                          "        lag[:, 1:] = kernels[:, 1:, 1]"),
+    "exact: ground response a lag late": ("        lag[:, :GRID] = second[:, 1:]",
+                                          "        lag[:, 1:] = second[:, 1:]"),
     # _ExactPair: held forces not moving the floors / not in the rate bound
     "exact: held force left out": ("                self._answer_now[:] += moved[:, 0]\n"
                                    "                upper += 0.5 * (moved[:, :-1] + moved[:, 1:])\n", ""),

@@ -192,7 +192,9 @@ class ModalBound:
         self.plastic_shear = None if plastic_shear is None else np.asarray(plastic_shear, dtype=float)
         self.plastic = None if plastic_shear is None else self.abs_drift_phi.T @ self.plastic_shear
         self._tables: dict[float, tuple[np.ndarray, ...]] = {}
-        self._ground_kernels: dict[float, tuple] = {}
+        self._ground_kernels: dict[float, tuple] = {}       # H -> the closed forms (_exact_tables)
+        self._full_kernels: dict[float, np.ndarray] = {}    # H -> ground_kernels
+        self._kernel_columns: dict[float, tuple] = {}       # H -> floor_kernel_columns
 
     @classmethod
     def through_yielding(cls, building: ShearBuilding, alpha: float, yield_shear) -> "ModalBound":
@@ -218,6 +220,8 @@ class ModalBound:
             if not impulse_only:
                 Ac[under] = decay * np.cos(wd * s)
             As[under] = decay * np.sin(wd * s) / wd
+        if under.size == self.n:                   # every mode underdamped: nothing left below
+            return Ac, As
         for j in range(self.n):
             wj, zj = self.w[j], self.zeta[j]
             if wj > 0.0 and zj < 1.0:
@@ -303,13 +307,50 @@ class ModalBound:
         free motion's tables: a hat function on grid point ``i`` is ``(ramp(s - s_(i-1)) - 2
         ramp(s - s_i) + ramp(s - s_(i+1))) / dS``, the first grid point's half hat ``step(s) -
         (ramp(s) - ramp(s - dS)) / dS``."""
-        return self._exact_tables(H)[1]
+        kernels = self._full_kernels.get(H)
+        if kernels is not None:
+            return kernels
+        _, full, half = self._exact_tables(H)
+        k = np.arange(GRID + 1)
+        d = k[:, None] - k[None, :]                  # k - i (points x points)
+        kernels = np.where((d >= 0)[None], full[:, np.clip(d, 0, GRID)], 0.0)
+        kernels[:, :, 0] = half
+        kernels *= -self.gamma[:, None, None]        # modal load -Gamma_j ag
+        if len(self._full_kernels) > 16:             # a bounded number of distinct horizons
+            self._full_kernels.pop(next(iter(self._full_kernels)))
+        self._full_kernels[H] = kernels
+        return kernels
 
     def floor_kernels(self, H: float) -> np.ndarray:
         """:meth:`ground_kernels` on the floors, ``Phi K`` (floors x points x points)."""
-        return self._exact_tables(H)[2]
+        n = self.n
+        return (self.phi @ self.ground_kernels(H).reshape(n, -1)).reshape(n, GRID + 1, GRID + 1)
+
+    def floor_kernel_columns(self, H: float) -> tuple[np.ndarray, np.ndarray]:
+        """``floor_kernels(H)[:, :, 0]`` and ``[:, :, 1]`` (floors x points): each floor's response
+        to the first grid value's half hat and to the hat at point 1, which by lag ``k - 1`` is the
+        response to every later hat (the kernels are Toeplitz there).  What :class:`_ExactPair`
+        takes, from the closed forms without the full kernels (points times fewer products).
+        Cached per ``H``."""
+        columns = self._kernel_columns.get(H)
+        if columns is not None:
+            return columns
+        _, full, half = self._exact_tables(H)
+        scale = -self.gamma[:, None]                 # modal load -Gamma_j ag
+        first = half * scale
+        second = np.empty_like(first)
+        second[:, 0] = 0.0                           # k - 1 < 0: before the hat
+        second[:, 1:] = full[:, :GRID]               # lag d = k - 1
+        second *= scale
+        if len(self._kernel_columns) > 16:           # a bounded number of distinct horizons
+            self._kernel_columns.pop(next(iter(self._kernel_columns)))
+        columns = self._kernel_columns[H] = (self.phi @ first, self.phi @ second)
+        return columns
 
     def _exact_tables(self, H: float) -> tuple:
+        """``(S, full, half)`` at ``H`` (modes x points, :meth:`ground_kernels`): the step
+        response, each mode's response to a hat at ``i >= 1`` by lag ``d = k - i``, and to the
+        first grid value's half hat by point ``k`` (before the modal load's ``-Gamma_j``)."""
         tables = self._ground_kernels.get(H)
         if tables is not None:
             return tables
@@ -329,15 +370,9 @@ class ModalBound:
         full = (padded[:, 2:] - 2.0 * padded[:, 1:-1] + padded[:, :-2]) / dS      # hat at i >= 1, by d = k - i
         full[:, -1] = 0.0                            # d = GRID would need R(GRID + 1); it does not occur
         half = S - (padded[:, 1:-1] - padded[:, :-2]) / dS                         # half hat at i = 0, by k
-        k = np.arange(GRID + 1)
-        d = k[:, None] - k[None, :]                  # k - i (points x points)
-        kernels = np.where((d >= 0)[None], full[:, np.clip(d, 0, GRID)], 0.0)
-        kernels[:, :, 0] = half
-        kernels *= -self.gamma[:, None, None]        # modal load -Gamma_j ag
-        floors = (self.phi @ kernels.reshape(n, -1)).reshape(n, GRID + 1, GRID + 1)
         if len(self._ground_kernels) > 16:           # a bounded number of distinct horizons
             self._ground_kernels.pop(next(iter(self._ground_kernels)))
-        tables = self._ground_kernels[H] = (S, kernels, floors)
+        tables = self._ground_kernels[H] = (S, full, half)
         return tables
 
     def _kernel_integrals(self, H: float, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -785,15 +820,17 @@ class _ExactPair(_LinearPair):
         dS = H / GRID
         slack = dS                      # the rate bound's slack is L dS / 2 (the gains hold the half)
         cl, cr = bl._cached(H), br._cached(H)
-        # the levels' kernels (levels x points k x grid values i), a hat's response by lag k - i
-        kernels = bl.floor_kernels(H)[fl] - br.floor_kernels(H)[fr]
+        # the levels' kernels' columns (levels x points k): the first grid value's half hat, and the
+        # hat at i = 1, by lag k - 1 every later hat's (ModalBound.floor_kernel_columns)
+        (l0, l1), (r0, r1) = bl.floor_kernel_columns(H), br.floor_kernel_columns(H)
+        first, second = l0[fl] - r0[fr], l1[fl] - r1[fr]
         lag = np.zeros((m, p))
-        lag[:, :GRID] = kernels[:, 1:, 1]             # lag d = k - 1 of the hat at i = 1; lag GRID: 0
+        lag[:, :GRID] = second[:, 1:]                 # lag d = k - 1 of the hat at i = 1; lag GRID: 0
         lags = 0.5 * lag
         lags[:, 1:] += 0.5 * lag[:, :-1]              # the mean of lags d and d - 1: an interval's mean
         # the first grid value's half hat, less what the convolution gave it (the lag's column)
-        half = _answer_rows(kernels[:, :, 0] - lag)
-        half[:, 0] = kernels[:, 0, 0] - lags[:, 0]    # point 0: the convolution gave it lags[:, 0] g_0
+        half = _answer_rows(first - lag)
+        half[:, 0] = first[:, 0] - lags[:, 0]         # point 0: the convolution gave it lags[:, 0] g_0
         # the state's table: each mode's free motion, the rate slack, the constant, g_0 (_LinearPair)
         modes = np.vstack((self._free_rows(H, slack), self._constant_rows(EXACT_MARGIN), half))
         # the bend's response: each building's bound of the whole ground's, levels' rows summed
@@ -1288,6 +1325,13 @@ def floor_forces(n: int, contributions: Sequence[tuple[int, float]]) -> np.ndarr
     return f if np.any(f) else None
 
 
+class _Plan(list):
+    """The pairs of one grouping of levels (:meth:`OpenGaps._linear_plan`) and how many horizons
+    they answer (counted once, not at every proof)."""
+
+    answers = 0
+
+
 class OpenGaps:
     """Every contact level of a system with what proves its gap open (module docstring):
     each building's :class:`ModalBound` and where its floors' states live in ``System.y``.
@@ -1501,10 +1545,11 @@ class OpenGaps:
         plan = self._plans.get(key)
         if plan is not None:
             return plan
-        plan = []
+        plan = _Plan()
         for pair in self._pairs(which):
             stiff = exact and all(np.all(self.buildings[b][0].w > 0.0) for b in pair[:2])
             plan.append((_ExactPair if stiff else _LinearPair)(self, *pair))
+        plan.answers = sum(len(p.positions) for p in plan)
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
@@ -1530,7 +1575,7 @@ class OpenGaps:
         horizons, tests/test_gap_bound_fast.py)."""
         exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
         plan = self._linear_plan(which, exact)
-        out = [0.0] * sum(len(p.positions) for p in plan)
+        out = [0.0] * plan.answers
         bound = peak = None
         # the coarse bound (_LinearPair.open_throughout) is tried on the levels of sleeping contacts
         # while others are awake (a proper subset): those lie away from the contacts and mostly pass
