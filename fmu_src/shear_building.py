@@ -274,6 +274,14 @@ class StepResult:
     E_damping: float
 
 
+def _step_length(h) -> float:
+    """``h`` (s) as a float, refused unless finite and > 0 (both propagators' one check)."""
+    h = float(h)
+    if not (math.isfinite(h) and h > 0.0):
+        raise ValueError(f"step size h = {h!r} s must be finite and > 0")
+    return h
+
+
 class ZohPropagator:
     """Exact one-step map of a shear building for inputs held constant over a step ``h`` (s).
 
@@ -294,9 +302,7 @@ class ZohPropagator:
     """
 
     def __init__(self, building: ShearBuilding, h: float):
-        h = float(h)
-        if not (math.isfinite(h) and h > 0.0):
-            raise ValueError(f"step size h = {h!r} s must be finite and > 0")
+        h = _step_length(h)
         self.building = building
         self.h = h
         n = building.n
@@ -449,9 +455,7 @@ class ModalZohPropagator:
     """
 
     def __init__(self, building: ShearBuilding, h: float):
-        h = float(h)
-        if not (math.isfinite(h) and h > 0.0):
-            raise ValueError(f"step size h = {h!r} s must be finite and > 0")
+        h = _step_length(h)
         self.building = building
         self.h = h
         n = building.n
