@@ -22,7 +22,8 @@ import pytest
 
 from cosim.apps.study import MAX_CASES, StudyError, StudyLock, load_study, read_results, run_study
 from cosim.cli import main as cli_main
-from study_helpers import local_client
+from cosim.master.scene import Override
+from study_helpers import SMALL, local_client
 
 SLOW = """
 name = "slow"
@@ -315,3 +316,47 @@ def test_output_folder_of_someone_else_is_refused_untouched(tmp_path, fmu_dir, c
     assert cli_main(["study", str(study), "--out", str(folder), "--fmu-dir", str(fmu_dir)]) == 2
     assert "holds files that no study wrote (thesis.tex)" in capsys.readouterr().err
     assert [p.name for p in folder.iterdir()] == ["thesis.tex"] and (folder / "thesis.tex").read_text() == "mine\n"
+
+
+def test_a_workers_teardown_never_frees_the_fmus_under_a_running_case(fmu_dir, monkeypatch):
+    """A Dask worker tears its plugin down (``CaseRunner.close``) from its event-loop thread while
+    a cancelled case may still step the FMUs in its task thread: freeing them then corrupted the
+    heap on a study's Ctrl-C.  close waits for the case (here: gives up after its wait and frees
+    nothing), and a close after the case frees everything."""
+    import threading
+
+    from cosim.apps.study import runner as runner_module
+
+    inside, release = threading.Event(), threading.Event()
+    real_simulate = runner_module.simulate
+
+    def held_simulate(system, **options):
+        inside.set()                        # the case is stepping its FMUs now
+        assert release.wait(30.0)
+        return real_simulate(system, **options)
+
+    monkeypatch.setattr(runner_module, "simulate", held_simulate)
+    runner = runner_module.CaseRunner(fmu_dir)
+    rows = []
+    case = threading.Thread(target=lambda: rows.append(runner.run(*_free_vibration_case())))
+    case.start()
+    try:
+        assert inside.wait(60.0)
+        assert runner.close(wait_s=0.2) is False      # a case runs: nothing freed
+        assert runner.system is not None
+    finally:
+        release.set()
+        case.join(60.0)
+    assert rows and rows[0]["status"] == "ok", rows
+    assert runner.close(wait_s=0.2) is True
+    assert runner.system is None
+
+
+def _free_vibration_case(tmp_path=None):
+    """``(scene_raw, overrides)`` of a small study's scene (the default scene), its first case
+    shortened to 0.3 s, read as a study reads it."""
+    import tempfile
+
+    folder = Path(tempfile.mkdtemp())
+    study = load_study(write(folder / "small.toml", SMALL))
+    return study.scene_raw, list(study.fixed) + [Override.of("stop_time", 0.3)]

@@ -50,6 +50,10 @@ def case_row(summary: Summary, energy_tolerance: float) -> dict[str, Any]:
     return row
 
 
+#: how long (s) :meth:`CaseRunner.close` waits for a running case before leaving its FMUs loaded
+CLOSE_WAIT_S = 2.0
+
+
 class CaseRunner:
     """Runs cases in one process: FMUs loaded once, one :class:`~cosim.master.System` reused.
 
@@ -111,9 +115,22 @@ class CaseRunner:
             row["worker"] = f"{os.uname().nodename}:{os.getpid()}"
             return row
 
-    def close(self) -> None:
-        self._drop_system()
-        self.catalog.close()
+    def close(self, wait_s: float = CLOSE_WAIT_S) -> bool:
+        """Free the FMUs, once no case runs; True if they were freed.
+
+        A Dask worker tears its plugin down from its event-loop thread while a cancelled case may
+        still run in its task thread (a thread cannot be stopped): freeing the instances under a
+        running doStep corrupted the heap ("malloc_consolidate(): unaligned fastbin chunk
+        detected" on a study's Ctrl-C, about one run in 30).  So close waits at most ``wait_s``
+        for the case to end, and otherwise leaves the FMUs to the ending process."""
+        if not self.lock.acquire(timeout=wait_s):
+            return False
+        try:
+            self._drop_system()
+            self.catalog.close()
+        finally:
+            self.lock.release()
+        return True
 
 
 def validate_study(study: Study, catalog) -> list[str]:
