@@ -33,6 +33,8 @@ their errors are tenths of mm.  How tight: :func:`test_accepted_gap_is_the_state
 """
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -509,13 +511,24 @@ def mutant(name: str):
     return module
 
 
-def first_violation(module, seeds=(2503, 2502, 2501, 2500), cases: int = CASES // CHUNKS):
-    """The fuzz's cases (the same seeds) against ``module`` (the test module's globals swapped):
-    ``(seed, case)`` of the first it fails, or None."""
+@contextlib.contextmanager
+def proofs_of(module):
+    """The test module's proof classes (``OpenGaps``, ``GroundAhead``, ``ModalBound``) taken from
+    ``module`` (a :func:`mutant`) while the block runs."""
     here = globals()
-    saved = {k: here[k] for k in ("OpenGaps", "GroundAhead", "ModalBound")}
-    here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead, ModalBound=module.ModalBound)
+    names = ("OpenGaps", "GroundAhead", "ModalBound")
+    saved = {k: here[k] for k in names}
+    here.update({k: getattr(module, k) for k in names})
     try:
+        yield
+    finally:
+        here.update(saved)
+
+
+def first_violation(module, seeds=(2503, 2502, 2501, 2500), cases: int = CASES // CHUNKS):
+    """The fuzz's cases (the same seeds) against ``module`` (:func:`proofs_of`): ``(seed, case)``
+    of the first it fails, or None."""
+    with proofs_of(module):
         for seed in seeds:
             rng = np.random.default_rng(seed)
             for n in range(cases):
@@ -523,8 +536,6 @@ def first_violation(module, seeds=(2503, 2502, 2501, 2500), cases: int = CASES /
                 if check_case(case, rng) is not None:
                     return seed, n
         return None
-    finally:
-        here.update(saved)
 
 
 #: mutations the fuzz does not catch, and why: each is swamped by the rate slack's ground term,
@@ -729,16 +740,10 @@ MUTATIONS.update({
 
 @pytest.mark.parametrize("name", sorted(BILINEAR_MUTATIONS))
 def test_bilinear_fuzz_catches_a_broken_term(name):
-    module = mutant(name)
-    here = globals()
-    saved = here["OpenGaps"], here["GroundAhead"]
-    here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead)
-    try:
+    with proofs_of(mutant(name)):
         # the exact pair's rate slack is caught in 1 of these 4 seeds (24 cases each), the plastic
         # term in 3: the bilinear cases meet few peaks between grid points near a grazing gap
         assert any(bilinear_violation(seed, 24) is not None for seed in (3102, 3100, 3101, 3103)), name
-    finally:
-        here["OpenGaps"], here["GroundAhead"] = saved
 
 
 def test_reused_proofs_answer_as_fresh_ones():
@@ -789,15 +794,8 @@ MUTATIONS.update(CACHE_MUTATIONS)
 
 @pytest.mark.parametrize("name", sorted(CACHE_MUTATIONS))
 def test_reuse_check_catches_a_stale_cache(name):
-    module = mutant(name)
-    here = globals()
-    saved = here["OpenGaps"], here["GroundAhead"]
-    here.update(OpenGaps=module.OpenGaps, GroundAhead=module.GroundAhead)
-    try:
-        with pytest.raises(AssertionError):
-            test_reused_proofs_answer_as_fresh_ones()
-    finally:
-        here["OpenGaps"], here["GroundAhead"] = saved
+    with proofs_of(mutant(name)), pytest.raises(AssertionError):
+        test_reused_proofs_answer_as_fresh_ones()
 
 
 # -- how tight: the smallest accepted gap against the motion's reach, on the default scene's pair ---------
