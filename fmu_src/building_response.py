@@ -934,11 +934,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         gather[:, two_n] = 3 * n + np.arange(count)
         gather[:, two_n + 1] = 3 * n + count + np.arange(count)
         gather[:, two_n + 2:] = two_n + np.arange(n)
-        chains = self._batch_plan(smap)[4]
-        if len(chains) >= MAX_CHAINS:
-            chains.pop(next(iter(chains)))
-        chains[count] = (chain, gather)
-        return chains[count]
+        return self._keep_chain(smap, count, chain, gather)
 
     def _knot_chain(self, smap, count: int):
         """:meth:`_chain` for :meth:`_uniform_elastic_batch`: from ``x = [z0; p; ag_0 .. ag_count]``
@@ -981,11 +977,16 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         gather[:, two_n] = 3 * n + intervals
         gather[:, two_n + 1] = width + count * two_n + intervals
         gather[:, two_n + 2:] = two_n + np.arange(n)
+        return self._keep_chain(smap, ("knots", count), chain, gather)
+
+    def _keep_chain(self, smap, key, chain: np.ndarray, gather: np.ndarray) -> tuple:
+        """``(chain, gather)`` kept in ``smap``'s plan under ``key`` (at most ``MAX_CHAINS``, the
+        oldest goes) and returned."""
         chains = self._batch_plan(smap)[4]
         if len(chains) >= MAX_CHAINS:
             chains.pop(next(iter(chains)))
-        chains[("knots", count)] = (chain, gather)
-        return chains[("knots", count)]
+        chains[key] = (chain, gather)
+        return chains[key]
 
     def fits_unmapped(self, h: float) -> bool:
         """True if :meth:`advance_unmapped` can take a step of ``h`` s (its quadrature stays within
