@@ -26,7 +26,7 @@ def rows(study, method):
 def test_every_strategy_is_measured(study):
     assert study.reference["impacts"] == 3
     assert {r.method for r in study.rows} == {"default settings", "jacobi", "gauss-seidel", "gauss-seidel-resolved",
-                                              "adaptive", "adaptive-resolved"}
+                                              "adaptive", "adaptive-resolved", "adaptive-resolved-0.04"}
     for r in study.rows:
         assert r.status == "ok"
         assert r.wall_time_s > 0 and r.communication_steps > 0 and r.fmu_calls > r.communication_steps
@@ -52,6 +52,43 @@ def test_default_settings_meet_the_criteria(study):
     (default,) = rows(study, "adaptive-resolved")
     assert default.meets_criteria
     assert default.communication_steps < 1.2 * study.stop_time / 0.01
+
+
+def test_the_coarse_family_is_cheaper_and_coarser(study):
+    """The front's coarse end (base step 0.04 s, contact_fraction 2, beyond the old range (0, 1])
+    runs, finds the reference's impacts in fewer than half the default settings' steps, and pays
+    for it in accuracy: measured 47 steps against 114, errors 1.6 / 9.1 / 0.45 % against 0.044 /
+    0.043 / 0.070 % (so the study lists it, and the front uses it only where it is good enough)."""
+    (coarse,) = rows(study, "adaptive-resolved-0.04")
+    (default,) = rows(study, "adaptive-resolved")
+    assert coarse.status == "ok" and coarse.value == 2.0
+    assert coarse.impacts == study.reference["impacts"]
+    assert coarse.communication_steps < default.communication_steps / 2
+    assert coarse.err_peak_force > default.err_peak_force and coarse.error > default.error
+    assert "| adaptive-resolved-0.04 | contact_fraction = 2 |" in markdown(study)
+
+
+def test_contact_fraction_range(catalog):
+    """The adaptive strategy takes contact fractions up to CONTACT_FRACTION_MAX (the coarse
+    family's 2) and refuses a larger one before the first step, naming the range; the study's
+    families stay inside it (checked at import, _check_families)."""
+    from cosim.master.coupling.adaptive import CONTACT_FRACTION_MAX
+    from cosim.master.loader import load_scene
+    from cosim.master.simulate import simulate
+    from cosim.master.system import System
+
+    assert CONTACT_FRACTION_MAX == 2.0
+    scene = load_scene("free_vibration", ["stop_time=0.08", "step=0.04"], catalog)
+    with System(scene, catalog) as system:
+        assert simulate(system, progress=False, contact_fraction=CONTACT_FRACTION_MAX).cost.communication_steps >= 2
+        with pytest.raises(ValueError, match=r"contact_fraction = 2\.5 must be in \(0, 2\]"):
+            simulate(system, progress=False, contact_fraction=2.5)
+
+
+def test_fraction_labels():
+    from cosim.apps.accuracy import _fraction_label
+
+    assert [_fraction_label(v) for v in (1 / 64, 1 / 2, 1.0, 2.0)] == ["1/64", "1/2", "1", "2"]
 
 
 def test_adaptive_beats_fixed_steps(study):

@@ -20,6 +20,10 @@ Strategies (:data:`FAMILIES`; every registered coupling strategy, :data:`cosim.m
   setting is ``contact_fraction`` (step in contact / impact time scale);
 * ``adaptive-resolved`` (base step 0.01 s) and ``adaptive-resolved-0.02``: the same with the
   contact FMU resolving its impacts;
+* ``adaptive-resolved-0.04``: the coarse end of the front, base step 0.04 s and
+  ``contact_fraction`` 2 and 1 (the largest the strategy accepts,
+  :data:`cosim.master.coupling.adaptive.CONTACT_FRACTION_MAX`): fewer steps around each
+  impact, errors of a few tenths of a per cent to a few per cent depending on the scene;
 * ``opensees``: the OpenSees peer (Newmark average acceleration, ``JankowskiImpact``; yielding
   storeys as ``Steel01`` or ``BoucWen``), at ``dt`` halved from 8 ms (:data:`OPENSEES_DTS`);
   its wall time is the analysis loop in its own process.
@@ -51,6 +55,7 @@ import numpy as np
 from ..files import output_target, written_folder
 from ..fmus import default_fmu_dir
 from ..master.coupling import STRATEGIES
+from ..master.coupling.adaptive import CONTACT_FRACTION_MAX
 from ..master.guard import InstabilityError
 from ..master.loader import load_scene
 from ..master.names import column, element_name
@@ -88,6 +93,10 @@ FAMILIES = (
            base_step=1e-2),
     Family("adaptive-resolved", "adaptive", True, "contact_fraction", (1 / 2, 1 / 8), base_step=1e-2),
     Family("adaptive-resolved-0.02", "adaptive", True, "contact_fraction", (1 / 2, 1 / 8), base_step=2e-2),
+    # the coarse end of the front (module docstring): 2 % and 1 % on scenes with few, slow impacts
+    # or many contact levels (free_vibration, kasai_maison), beyond 2 % on others (default: peak
+    # force 2.1 % at 1, 11 % at 2), so never a default
+    Family("adaptive-resolved-0.04", "adaptive", True, "contact_fraction", (2.0, 1.0), base_step=4e-2),
 )
 #: OpenSees' time steps (s): halving from 8 ms, down to where its dissipated energy is within
 #: about 0.05 % on the default scene
@@ -99,7 +108,10 @@ REDUCED_FAMILIES = (
     Family("gauss-seidel-resolved", "gauss-seidel", True, "step", (1e-2,)),
     Family("adaptive", "adaptive", False, "contact_fraction", (1 / 16, 1 / 64), base_step=1e-2),
     Family("adaptive-resolved", "adaptive", True, "contact_fraction", (1 / 2,), base_step=1e-2),
+    Family("adaptive-resolved-0.04", "adaptive", True, "contact_fraction", (2.0,), base_step=4e-2),
 )
+#: each method's marker in the plots (the families', then OpenSees')
+MARKERS = {**dict(zip([f.name for f in FAMILIES], "sovDP*X")), "opensees": "^"}
 
 
 @dataclass
@@ -414,6 +426,13 @@ def write_csv(study: Study, path: Path) -> None:
             writer.writerow({k: (f"{values[k]:.6g}" if isinstance(values[k], float) else values[k]) for k in COLUMNS})
 
 
+def _fraction_label(value: float) -> str:
+    """``1/64`` for a unit fraction below 1, else the number (``1``, ``2``)."""
+    if value >= 1.0:
+        return f"{value:g}"
+    return f"1/{1 / value:.0f}"
+
+
 def _pct(x: float) -> str:
     return "" if not math.isfinite(x) else f"{100 * x:.3g}"
 
@@ -438,7 +457,7 @@ def markdown(study: Study) -> str:
     blank = " |" * (2 if yielding else 0)
     for r in study.rows:
         if r.setting == "contact_fraction":
-            setting = f"contact_fraction = 1/{1 / r.value:.0f}"
+            setting = f"contact_fraction = {_fraction_label(r.value)}"
         elif r.setting == "default":
             setting = "the scene's"
         else:
@@ -480,8 +499,6 @@ def plot(study: Study, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
-    markers = dict(zip(["jacobi", "gauss-seidel", "gauss-seidel-resolved", "adaptive", "adaptive-resolved",
-                        "adaptive-resolved-0.02", "opensees"], "sovDP*^"))
     for method in dict.fromkeys(r.method for r in study.rows):
         rows = sorted((r for r in study.rows if r.status.startswith("ok") and math.isfinite(r.error)),
                       key=lambda r: r.wall_time_s)
@@ -490,11 +507,11 @@ def plot(study: Study, path: Path) -> None:
             continue
         wall = [r.wall_time_s for r in rows]
         err = [max(r.error, 1e-6) for r in rows]
-        line, = ax.loglog(wall, err, "-", marker=markers.get(method, "o"), mfc="none", label=method)
+        line, = ax.loglog(wall, err, "-", marker=MARKERS.get(method, "o"), mfc="none", label=method)
         ok = [r for r in rows if r.meets_criteria]
         if ok:
             ax.loglog([r.wall_time_s for r in ok], [max(r.error, 1e-6) for r in ok], linestyle="none",
-                      marker=markers.get(method, "o"), color=line.get_color())
+                      marker=MARKERS.get(method, "o"), color=line.get_color())
     ax.axvline(study.reference["wall_time_s"], color="k", ls=":", lw=1)
     ax.text(study.reference["wall_time_s"], ax.get_ylim()[1], " reference\n (solve_ivp)", va="top", fontsize=8)
     ax.axhline(CRITERIA["peak_force"], color="grey", ls="--", lw=0.8)
@@ -567,8 +584,6 @@ def plot_front(study: Study, path: Path) -> None:
 
     impacts = study.reference["impacts"]
     fig, axes = plt.subplots(1, len(METRICS), figsize=(15, 4.8), sharex=True)
-    markers = dict(zip(["jacobi", "gauss-seidel", "gauss-seidel-resolved", "adaptive", "adaptive-resolved",
-                        "adaptive-resolved-0.02", "opensees"], "sovDP*^"))
     methods = list(dict.fromkeys(r.method for r in study.rows))
     for ax, (metric, label) in zip(axes, METRICS):
         for method in methods:
@@ -577,7 +592,7 @@ def plot_front(study: Study, path: Path) -> None:
             if not rows or method == DEFAULT_SETTINGS.name:
                 continue
             ax.loglog([r.wall_time_s for r in rows], [max(getattr(r, metric), 1e-7) for r in rows],
-                      linestyle=":", marker=markers.get(method, "o"), mfc="none", lw=0.8, ms=5,
+                      linestyle=":", marker=MARKERS.get(method, "o"), mfc="none", lw=0.8, ms=5,
                       color="k" if method == "opensees" else None, label=method)
         for rows, name, style in (([r for r in study.rows if r.method != "opensees"], "package front", "-"),
                                   ([r for r in study.rows if r.method == "opensees"], "OpenSees front", "--")):
@@ -638,12 +653,17 @@ def study_and_write(scene: str, out: str | Path | None, overrides: Sequence[Over
 
 
 def _check_families() -> None:
-    """Every family runs a registered strategy, and every registered strategy is studied."""
+    """Every family runs a registered strategy, every registered strategy is studied, every
+    ``contact_fraction`` is one the adaptive strategy accepts, and every family has a marker."""
     unknown = {f.coupling for f in FAMILIES + REDUCED_FAMILIES} - set(STRATEGIES)
     missing = set(STRATEGIES) - {f.coupling for f in FAMILIES}
-    if unknown or missing:
+    fractions = sorted({v for f in FAMILIES + REDUCED_FAMILIES if f.setting == "contact_fraction" for v in f.values
+                        if not 0.0 < v <= CONTACT_FRACTION_MAX})
+    unmarked = sorted({f.name for f in FAMILIES + REDUCED_FAMILIES} - set(MARKERS))
+    if unknown or missing or fractions or unmarked:
         raise ValueError(f"accuracy study families: unknown couplings {sorted(unknown)}, "
-                         f"strategies without a family {sorted(missing)}")
+                         f"strategies without a family {sorted(missing)}, contact fractions outside "
+                         f"(0, {CONTACT_FRACTION_MAX:g}] {fractions}, families without a marker {unmarked}")
 
 
 _check_families()
