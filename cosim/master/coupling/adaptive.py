@@ -142,13 +142,14 @@ SAVE_SPEED_MARGIN = 1.5
 #: contact step / impact time scale, by contact mode (chosen from docs/accuracy.md)
 CONTACT_FRACTION_RESOLVED = 1.0 / 2.0
 CONTACT_FRACTION_PLAIN = 1.0 / 64.0
-#: the largest ``contact_fraction`` accepted.  A step of 2 T is still shorter than an elastic
-#: impact (pi T with a linear spring, 3.22 T with Hertz's n = 3/2), so the master keeps a
-#: communication point inside a resolved impact; the accuracy study's coarse family
-#: (docs/accuracy.md) runs 2 at a base step of 0.04 s and its five scenes keep the reference's
-#: impacts, while at 4 free_vibration counts 4 of its 5 (a coarse setting for the cost-accuracy
-#: front, not a default: parkfield at that base step counts 10 impacts for 9, at 1 and 2 alike).
-#: With the plain force law a step over 1/4 of T stops the run (the stability guard) whatever this allows
+#: the largest ``contact_fraction`` accepted, measured, not derived: a resolved impact is exact
+#: inside one step however long (docs/accuracy.md, hard cases: 10 contact durations), but it
+#: learns the buildings' push one communication step late, and a step of 2 T is still shorter
+#: than an elastic impact (pi T with a linear spring, 3.22 T with Hertz's n = 3/2).  The accuracy
+#: study's coarse family (base step 0.04 s) runs 2 and its five scenes keep the reference's
+#: impacts; at 4 free_vibration counts 4 of its 5.  A coarse setting for the cost-accuracy front,
+#: not a default (parkfield at that base step counts 10 impacts for 9, at 1 and 2 alike).  With
+#: the plain force law a step over 1/4 of T stops the run (the stability guard) whatever this allows
 CONTACT_FRACTION_MAX = 2.0
 
 
