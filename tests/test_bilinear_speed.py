@@ -243,8 +243,12 @@ def test_one_chunk_nodes_and_cached_taylor_powers_are_the_general_ones():
     assert np.array_equal(weights, np.tile(width * GAUSS_WEIGHTS, 1))
     assert cfg.chunk_nodes(3.0 / cfg.rate)[0].size == 2 * GAUSS_NODES.size     # two chunks: general form
     assert cfg.taylor_powers(12) is cfg.taylor_powers(12)
-    fresh = _taylor_powers(cfg.lam, 12)
-    assert all(np.array_equal(a, c) for a, c in zip(cfg.taylor_powers(12)[:3], fresh[:3]))
+    # every degree (prefixes of the highest one a TaylorSegment asks, or made apart above it)
+    from fmu_src.linear_response import TAYLOR_MAX_SPAN, _taylor_degree
+    for degree in range(3, _taylor_degree(TAYLOR_MAX_SPAN) + 3):
+        fresh = _taylor_powers(cfg.lam, degree)
+        kept = cfg.taylor_powers(degree)
+        assert kept[3] == degree and all(np.array_equal(a, c) for a, c in zip(kept[:3], fresh[:3]))
     rng = np.random.default_rng(8)
     z0 = rng.normal(size=2 * n) * 0.02
     w = np.concatenate([[1.5, -90.0], rng.normal(size=n) * 1e5])
