@@ -53,7 +53,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import eig, get_lapack_funcs, lu_factor
-from scipy.linalg.lapack import _compute_lwork
+try:        # scipy's own workspace query for eig's geev (private: _eigen falls back to eig without it)
+    from scipy.linalg.lapack import _compute_lwork
+except ImportError:       # pragma: no cover - a scipy that moved it
+    _compute_lwork = None
 
 GAUSS_POINTS = 10
 _GX, _GW = np.polynomial.legendre.leggauss(GAUSS_POINTS)
@@ -314,7 +317,7 @@ def _eigen(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     outside LAPACK for 15 storeys, at every new yield pattern).  A non-finite matrix, or a
     LAPACK failure, goes through eig itself (its checks and errors)."""
     geev, geev_lwork = get_lapack_funcs(("geev", "geev_lwork"), (A,))
-    if geev.typecode != "d" or not np.isfinite(A).all():
+    if _compute_lwork is None or geev.typecode != "d" or not np.isfinite(A).all():
         return eig(A)
     lwork = _compute_lwork(geev_lwork, A.shape[0], compute_vl=0, compute_vr=1)
     wr, wi, _, vr, info = geev(A, lwork=lwork, compute_vl=0, compute_vr=1, overwrite_a=0)
