@@ -109,6 +109,19 @@ _PREFILTER_FROM = 16        # candidate functions from which _peaks drops the cl
 _HERMITE_MARGIN = 2e-12
 
 
+def _hermite_spread(g0: float, g1: float, d0: float, d1: float) -> float:
+    """How far :func:`hermite_range_scalar` ``(g0, g1, d0, d1)`` can reach beyond the end values,
+    round-off included: ``lo >= min(g0, g1) - spread`` and ``hi <= max(g0, g1) + spread``.
+
+    On [0, 1] the cubic Hermite is ``h00 g0 + h01 g1 + h10 d0 + h11 d1`` with ``h00 + h01 = 1``,
+    both in [0, 1], and ``|h10|, |h11| <= 4/27``; the floating-point range stays within 1e-12 of
+    the magnitudes of the end values and slopes of that (``_HERMITE_MARGIN``,
+    ``test_the_peak_prefilter_bound_dominates_the_hermite_test``).  Rounding being monotonic, a
+    test that this wider range passes, the range itself passes: a prefilter that skips the roots."""
+    a0, a1 = abs(d0), abs(d1)
+    return _HERMITE_SLOPE_GAIN * (a0 + a1) + _HERMITE_MARGIN * (abs(g0) + abs(g1) + a0 + a1)
+
+
 @dataclass
 class BuildingState:
     """Everything a building carries from one step to the next (copied by FMU state, :meth:`snapshot`).
@@ -1259,8 +1272,16 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             if scan is not None:
                 # the Hermite test (as in _peaks): the drift's range and its error bound
                 g = G[i]
-                lo, hi = hermite_range_scalar(g[0], g[1], length * g[2], length * g[3])
-                err = B[i] * w4 + 1e-12 * (abs(g[0]) + abs(g[1]) + length * (abs(g[2]) + abs(g[3])))
+                g0, g1, s0, s1 = g[0], g[1], length * g[2], length * g[3]
+                err = B[i] * w4 + 1e-12 * (abs(g0) + abs(g1) + length * (abs(g[2]) + abs(g[3])))
+                # first the cheaper bound of that range (_hermite_spread): where it decides, the
+                # test decides the same (|k x - shift| is convex in x and rounding is monotonic),
+                # without the roots (most storeys of most segments, 9600 of 9700 tests measured)
+                spread = _hermite_spread(g0, g1, s0, s1)
+                low, high = (g0, g1) if g0 < g1 else (g1, g0)
+                if max(abs(k[i] * (low - spread - err) - shift), abs(k[i] * (high + spread + err) - shift)) <= peak[i]:
+                    continue
+                lo, hi = hermite_range_scalar(g0, g1, s0, s1)
                 if max(abs(k[i] * (lo - err) - shift), abs(k[i] * (hi + err) - shift)) <= peak[i]:
                     continue
             if segment is None:
@@ -1385,20 +1406,34 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         modes, slips, dys = mode.tolist(), state.slip.tolist(), self.dy.tolist()
         ups, downs, unloads = up_flags.tolist(), down_flags.tolist(), unload_flags.tolist()
         candidates = []
+        # (each Hermite range only where its cheaper bound, _hermite_spread, leaves the test
+        # open: where that bound decides, the range decides the same, rounding being monotonic)
         for i in storeys:
             g = G[i]
             if modes[i] == 0:
                 s = slips[i]
-                lo, hi = hermite_range_scalar(g[0] - s, g[1] - s, rem * g[2], rem * g[3])
+                g0, g1, s0, s1 = g[0] - s, g[1] - s, rem * g[2], rem * g[3]
                 err = B[i][0] * w4
-                if ups[i] and hi + err >= dys[i]:
+                dy = dys[i]
+                spread = _hermite_spread(g0, g1, s0, s1)
+                low, high = (g0, g1) if g0 < g1 else (g1, g0)
+                up = ups[i] and high + spread + err >= dy
+                down = downs[i] and low - spread - err <= -dy
+                if not (up or down):
+                    continue
+                lo, hi = hermite_range_scalar(g0, g1, s0, s1)
+                if up and hi + err >= dy:
                     candidates.append((i, +1))
-                if downs[i] and lo - err <= -dys[i]:
+                if down and lo - err <= -dy:
                     candidates.append((i, -1))
             elif unloads[i]:
                 sg = float(modes[i])
-                lo, _ = hermite_range_scalar(sg * g[2], sg * g[3], rem * sg * g[4], rem * sg * g[5])
-                if lo - B[i][1] * w4 <= 0.0:
+                g0, g1, s0, s1 = sg * g[2], sg * g[3], rem * sg * g[4], rem * sg * g[5]
+                err = B[i][1] * w4
+                if (g0 if g0 < g1 else g1) - _hermite_spread(g0, g1, s0, s1) - err > 0.0:
+                    continue
+                lo, _ = hermite_range_scalar(g0, g1, s0, s1)
+                if lo - err <= 0.0:
                     candidates.append((i, 0))
         if not candidates:
             return segment, None

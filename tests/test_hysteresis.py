@@ -609,6 +609,54 @@ def test_the_peak_prefilter_bound_dominates_the_hermite_test():
     assert -1e-3 < worst < 1e-14
 
 
+def test_the_hermite_spread_bounds_the_range_from_the_end_values():
+    """building_response._hermite_spread (the prefilter of the event and shear tests) must hold
+    hermite_range_scalar's range within [min(g0, g1) - spread, max(g0, g1) + spread], round-off
+    included, on each side (random cubics, with end values that nearly cancel the slopes); without
+    its round-off margin the bound is reached to ~1e-14 (tight: 4/27 is the basis's maximum)."""
+    from fmu_src.building_response import _HERMITE_SLOPE_GAIN, _hermite_spread
+    from fmu_src.linear_response import hermite_range_scalar
+    rng = np.random.default_rng(11)
+    worst = -math.inf
+    for scale in (1e-9, 1.0, 1e6):
+        g = rng.normal(size=(20000, 4)) * scale * 10.0 ** rng.integers(-3, 4, size=(20000, 4))
+        g[::3, 1] = g[::3, 0] + 1e-9 * g[::3, 2]           # nearly flat ends, large slopes
+        g[1::3, 2:] = np.abs(g[1::3, 2:])                   # slopes of one sign: a one-sided excursion
+        for g0, g1, d0, d1 in g.tolist():
+            lo, hi = hermite_range_scalar(g0, g1, d0, d1)
+            spread = _hermite_spread(g0, g1, d0, d1)
+            assert lo >= min(g0, g1) - spread and hi <= max(g0, g1) + spread
+            gain = _HERMITE_SLOPE_GAIN * (abs(d0) + abs(d1))
+            magnitude = abs(g0) + abs(g1) + abs(d0) + abs(d1)
+            worst = max(worst, (min(g0, g1) - gain - lo) / magnitude, (hi - max(g0, g1) - gain) / magnitude)
+    assert -1e-3 < worst < 1e-14
+
+
+def test_events_and_shear_peaks_with_and_without_the_hermite_spread_are_identical(monkeypatch):
+    """The prefilter of _first_event and _track_shear (_hermite_spread) only skips work: a yielding
+    building's events, state, energies and peaks are bit for bit those of the plain Hermite tests
+    (an infinite spread decides nothing)."""
+    import fmu_src.building_response as response
+    rec = el_centro(0.5)
+    runs = []
+    for spread in (response._hermite_spread, lambda *args: math.inf):
+        monkeypatch.setattr(response, "_hermite_spread", spread)
+        b = ShearBuilding.from_period(0.8, [3e5] * 6, [1.0] * 6, 0.05)
+        it = integrator_for(b, StoreyHysteresis("bilinear", [1.2e6, 1.1e6, 1.0e6, 0.8e6, 0.6e6, 0.4e6], 0.05))
+        st = it.initial_state(np.zeros(6), np.zeros(6))
+        log = []
+        for i in range(400):
+            t0, t1 = 1.0 + 0.01 * i, 1.0 + 0.01 * (i + 1)
+            times, ag = step_knots(rec, t0, t1)
+            log += it.advance(st, times - t0, ag, np.zeros(6)).event_log
+        it.resolve_peaks(st)
+        runs.append((log, np.concatenate([st.u, st.v, st.slip, st.peaks, st.peak_shear]),
+                     (st.E_input, st.E_damping, st.E_hysteretic)))
+    assert len(runs[0][0]) > 20 and runs[0][0] == runs[1][0]
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] == runs[1][2]
+
+
 def test_peaks_with_and_without_the_prefilter_are_identical(monkeypatch):
     """The prefilter of _peaks (active from 16 candidate functions: 6 storeys and up) only skips
     work: the running peaks and the deferred searches are bit for bit those of the plain tests."""
