@@ -115,8 +115,8 @@ def test_the_knot_count_is_found_without_reading_it(catalog, monkeypatch):
     found = []
     own = GroundLookahead._knots
 
-    def checked(self, t1):
-        n = own(self, t1)
+    def checked(self, t0, t1):
+        n = own(self, t0, t1)
         found.append((n, int(self.count.get()[0])))
         return n
 
@@ -140,18 +140,23 @@ class _Port:
 
 
 def test_a_last_knot_off_the_end_falls_back_to_the_count():
-    """An FMU whose last knot time is not the step's end bit for bit (or that has no knots,
-    ``n_knots = 0``: every slot 0) gets its ``n_knots`` read."""
+    """An FMU whose last knot time is not the step's end bit for bit (or whose first is not its
+    start, or that has no knots, ``n_knots = 0``: every slot 0, even for a step ending at 0 s)
+    gets its ``n_knots`` read."""
     look = GroundLookahead.__new__(GroundLookahead)
     look.capacity = 4
-    t1 = 0.3
-    look.port = _Port([0.1, 0.2, np.nextafter(t1, 1.0), 0.0, 1.0, 2.0, 3.0, 0.0])
+    t0, t1 = 0.0, 0.3
+    look.port = _Port([t0, 0.2, np.nextafter(t1, 1.0), 0.0, 1.0, 2.0, 3.0, 0.0])
     look.count = _Port([3])
-    assert look._knots(t1) == 3 and look.count.gets == 1
-    look.port = _Port([0.1, 0.2, t1, 0.0, 1.0, 2.0, 3.0, 0.0])
-    assert look._knots(t1) == 3 and look.count.gets == 1           # found: not read
-    look.port = _Port([0.1, t1, t1, t1, 1.0, 2.0, 3.0, 4.0])       # the first slot after the first holding t1
-    assert look._knots(t1) == 2
+    assert look._knots(t0, t1) == 3 and look.count.gets == 1
+    look.port = _Port([t0, 0.2, t1, 0.0, 1.0, 2.0, 3.0, 0.0])
+    assert look._knots(t0, t1) == 3 and look.count.gets == 1        # found: not read
+    look.port = _Port([t0, t1, t1, t1, 1.0, 2.0, 3.0, 4.0])         # the first slot after the first holding t1
+    assert look._knots(t0, t1) == 2
     look.port = _Port([0.0] * 8)
     look.count = _Port([0])
-    assert look._knots(t1) == 0 and look.count.gets == 1
+    assert look._knots(t0, t1) == 0 and look.count.gets == 1
+    assert look._knots(-0.3, 0.0) == 0 and look.count.gets == 2     # the zeros are not knots
+    look.port = _Port([np.nextafter(t0, 1.0), 0.2, t1, 0.0, 1.0, 2.0, 3.0, 0.0])
+    look.count = _Port([3])
+    assert look._knots(t0, t1) == 3 and look.count.gets == 1

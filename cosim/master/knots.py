@@ -73,7 +73,7 @@ class GroundLookahead:
             t0 = self.t_end
             self.node.instance.do_step(t0, h)
             self.ground_steps += 1
-            n = self._knots(t0 + h)
+            n = self._knots(t0, t0 + h)
             if n < 2:
                 raise KnotsUnavailable(f"the ground motion's record needs more than {self.capacity} knots over "
                                        f"{h:g} s (a sampling interval below {h / (self.capacity - 1):.3g} s)")
@@ -93,18 +93,21 @@ class GroundLookahead:
             if n <= GROW_BELOW and self.width < self.max_chunk:
                 self.width = min(2.0 * self.width, self.max_chunk)
 
-    def _knots(self, t1: float) -> int:
-        """Read every knot slot of the step just taken (one fmi2GetReal) and return ``n_knots``.
+    def _knots(self, t0: float, t1: float) -> int:
+        """Read every knot slot of the step ``[t0, t1]`` just taken (one fmi2GetReal) and return
+        ``n_knots``.
 
-        The step's last knot is at its end, ``t_knot[n_knots] = current_time + step_size``
-        (ground_motion.fmu computes that sum as the master does, ``t1``, bit for bit) and every
-        knot before it lies earlier (inside knots end ``SNAP`` before it: fmu_src/record_knots.py),
-        so ``n_knots`` is one more than the first slot after the first that holds ``t1``
-        (tests/test_knots.py): no fmi2GetInteger.  Without one (no knots: ``n_knots = 0``, or
-        an FMU whose last time differs by round-off) ``n_knots`` is read."""
-        at_end = self.port.get()[1:self.capacity] == t1
+        The step's first knot is at its start and its last at its end, ``t_knot[n_knots] =
+        current_time + step_size`` (ground_motion.fmu computes that sum as the master does,
+        ``t1``, bit for bit); every knot before the last lies earlier (inside knots end ``SNAP``
+        before it: fmu_src/record_knots.py), so ``n_knots`` is one more than the first slot after
+        the first that holds ``t1`` (tests/test_knots.py): no fmi2GetInteger.  Otherwise (no
+        knots, ``n_knots = 0``: every slot 0; an FMU whose ends differ by round-off) ``n_knots``
+        is read."""
+        times = self.port.get()[:self.capacity]
+        at_end = times[1:] == t1
         last = int(at_end.argmax())     # the first True (0 if none)
-        if at_end[last]:
+        if at_end[last] and times[0] == t0:
             return last + 2
         return int(self.count.get()[0])
 
