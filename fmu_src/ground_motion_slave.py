@@ -23,7 +23,9 @@ inside and ``(t + h, ag(t + h-))`` (a jump where the record starts or ends is tw
 time; ``fmu_src/record_knots.py``).  A building fed these knots integrates the record exactly
 over any step length.  A step that needs more than KNOT_CAPACITY knots still succeeds and sets
 ``n_knots = 0``: use ``ag_mean`` for it.  Elements beyond ``n_knots`` are 0; before the first
-step ``n_knots = 0``.  The knots are computed when first read after a step (a host that does
+step ``n_knots = 0``.  The last knot's time is ``current_time + step_size`` as the host's doubles
+add (every other knot lies earlier), so a host that reads every ``t_knot`` finds ``n_knots``
+from it without an fmi2GetInteger (cosim/master/knots.py).  The knots are computed when first read after a step (a host that does
 not read them does not pay for them).
 """
 from __future__ import annotations

@@ -303,3 +303,27 @@ def test_floor_kernel_columns_are_the_full_kernels_columns(seed):
     for i in (2, GRID // 2, GRID):
         np.testing.assert_allclose(full[:, i:, i], second[:, 1:GRID + 2 - i], rtol=0, atol=1e-13 * scale)
         assert not full[:, :i, i].any()             # before the hat: nothing
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_bilinear_pair_ground_response_is_the_full_kernels(seed):
+    """_BilinearPair's response of every row (floors and storey drifts, both buildings) to the
+    ground on the grid, from its kernel columns by the Toeplitz convolution, is the full kernels'
+    (:meth:`ModalBound.ground_kernels`, rows applied) to round-off, far inside EXACT_MARGIN: a
+    lag shifted by one, a dropped half hat or a missing ``-Gamma`` would be off by the response
+    itself."""
+    from cosim.master import gap_bound
+    from cosim.master.gap_bound import _BilinearPair
+    rng = np.random.default_rng(70 + seed)
+    buildings, elastic, yielded, y, _ = elastic_buildings(rng, 0.05)
+    gaps = OpenGaps(buildings, [("left", 2, "right", 2, 0.05)], elastic, yielded)
+    pair = _BilinearPair(gaps, *gaps._pairs(None)[0])
+    H = float(rng.choice([0.05, 0.33]))
+    g = rng.normal(0.0, 3.0, GRID + 1)
+    pair._ground[:] = g
+    lags, first = pair._kernels(H)
+    got = lags @ pair._toeplitz + first * g[0]
+    want = np.vstack([(b.rows @ b.ground_kernels(H).reshape(b.n, -1)).reshape(-1, GRID + 1, GRID + 1) @ g
+                      for b in pair.bounds])
+    assert np.abs(want).max() > 1e3 * gap_bound.EXACT_MARGIN       # a response worth the name
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())

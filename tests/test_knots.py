@@ -101,3 +101,62 @@ def test_yielding_buildings_follow_the_record_exactly_at_every_step(catalog):
     np.testing.assert_allclose(got, ref.u[rows], rtol=0, atol=1e-8)
     # the storeys did yield (hysteretic energy) before the first impact
     assert all(result.value_at_end(f"{b.name}.E_hysteretic") > 0.0 for b in scene.buildings)
+
+
+def test_the_knot_count_is_found_without_reading_it(catalog, monkeypatch):
+    """GroundLookahead reads a chunk's knots in one fmi2GetReal and finds ``n_knots`` from the
+    last knot's time (the chunk's end): on every chunk of runs over a record's start, its middle
+    and its end, with the ground's chunks doubling, the count it finds is ground_motion.fmu's
+    ``n_knots``, and no run asks for the Integer."""
+    from cosim.master.loader import load_scene
+    from cosim.master.simulate import simulate
+    from cosim.master.system import System
+
+    found = []
+    own = GroundLookahead._knots
+
+    def checked(self, t0, t1):
+        n = own(self, t0, t1)
+        found.append((n, int(self.count.get()[0])))
+        return n
+
+    monkeypatch.setattr(GroundLookahead, "_knots", checked)
+    for name, overrides in (("default", ["stop_time=3"]), ("kasai_maison", []), ("free_vibration", [])):
+        scene = load_scene(name, overrides, catalog)
+        with System(scene, catalog) as system:
+            simulate(system, "adaptive", progress=False)
+    assert len(found) > 100 and {n for n, _ in found} >= {2}
+    assert all(n == count for n, count in found), [f for f in found if f[0] != f[1]][:3]
+
+
+class _Port:
+    def __init__(self, values):
+        self.values = np.asarray(values, float)
+        self.gets = 0
+
+    def get(self):
+        self.gets += 1
+        return self.values
+
+
+def test_a_last_knot_off_the_end_falls_back_to_the_count():
+    """An FMU whose last knot time is not the step's end bit for bit (or whose first is not its
+    start, or that has no knots, ``n_knots = 0``: every slot 0, even for a step ending at 0 s)
+    gets its ``n_knots`` read."""
+    look = GroundLookahead.__new__(GroundLookahead)
+    look.capacity = 4
+    t0, t1 = 0.0, 0.3
+    look.port = _Port([t0, 0.2, np.nextafter(t1, 1.0), 0.0, 1.0, 2.0, 3.0, 0.0])
+    look.count = _Port([3])
+    assert look._knots(t0, t1) == 3 and look.count.gets == 1
+    look.port = _Port([t0, 0.2, t1, 0.0, 1.0, 2.0, 3.0, 0.0])
+    assert look._knots(t0, t1) == 3 and look.count.gets == 1        # found: not read
+    look.port = _Port([t0, t1, t1, t1, 1.0, 2.0, 3.0, 4.0])         # the first slot after the first holding t1
+    assert look._knots(t0, t1) == 2
+    look.port = _Port([0.0] * 8)
+    look.count = _Port([0])
+    assert look._knots(t0, t1) == 0 and look.count.gets == 1
+    assert look._knots(-0.3, 0.0) == 0 and look.count.gets == 2     # the zeros are not knots
+    look.port = _Port([np.nextafter(t0, 1.0), 0.2, t1, 0.0, 1.0, 2.0, 3.0, 0.0])
+    look.count = _Port([3])
+    assert look._knots(t0, t1) == 3 and look.count.gets == 1

@@ -926,7 +926,12 @@ class _BilinearPair:
         self.stiff = bool(np.all(bl.w > 0.0) and np.all(br.w > 0.0))
         if self.stiff:
             self._rows_gain = np.concatenate((bl.abs_rows @ np.abs(bl.gamma), br.abs_rows @ np.abs(br.gamma)))[:, None]
-        self._row_kernels: dict = {}    # H -> every row's ground kernel, both buildings stacked
+        self._row_kernels: dict = {}    # H -> every row's ground kernel columns, both buildings stacked
+        # the ground on the grid after GRID zeros, and the Toeplitz view of it the rows' kernel
+        # columns are multiplied by (as _ExactPair's: M[d, k] = g[k - d])
+        padded = np.zeros(GRID + GRID + 1)
+        self._ground = padded[GRID:]
+        self._toeplitz = np.lib.stride_tricks.sliding_window_view(padded, GRID + 1)[GRID::-1]
 
     def _tables(self, H: float) -> tuple:
         """``(Ac, As, ground rows of every floor and storey drift)`` of both buildings, stacked."""
@@ -977,16 +982,27 @@ class _BilinearPair:
         self._yielded_state = None
         self._yielded_motion = {}
 
-    def _kernels(self, H: float) -> np.ndarray:
+    def _kernels(self, H: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(lags, first)`` at ``H`` (rows x points, both buildings' rows stacked): every row's
+        response at point ``k`` to the hat at grid point ``i >= 1`` by its lag ``d = k - i``
+        (:meth:`ModalBound.ground_kernels` is Toeplitz there), and to the first grid value's half
+        hat by point less ``lags[:, k]`` (what the convolution gives ``g_0``).  The rows' response
+        to ``g`` is then ``lags @ M + first g_0`` with ``M[d, k] = g[k - d]`` (zero for ``k < d``):
+        :meth:`ModalBound.ground_kernels` applied, summed in another order (round-off, well
+        inside :data:`EXACT_MARGIN`), without the rows' full kernels (rows x points x points,
+        1.5 MB on kasai_maison_inelastic, read at every proof).  Made once per horizon."""
         kernels = self._row_kernels.get(H)
         if kernels is None:
             if len(self._row_kernels) > 16:
                 self._row_kernels.pop(next(iter(self._row_kernels)))
-            parts = []
+            lags, first = [], []
             for bound in self.bounds:
-                modal = bound.ground_kernels(H)
-                parts.append((bound.rows @ modal.reshape(bound.n, -1)).reshape(-1, GRID + 1))
-            kernels = self._row_kernels[H] = np.vstack(parts)
+                _, full, half = bound._exact_tables(H)
+                scale = -bound.gamma[:, None]           # modal load -Gamma_j ag
+                lag = bound.rows @ (full * scale)
+                lags.append(lag)
+                first.append(bound.rows @ (half * scale) - lag)
+            kernels = self._row_kernels[H] = (np.vstack(lags), np.vstack(first))
         return kernels
 
     def _linear(self, H: float, ground: np.ndarray, ahead: "GroundAhead | None" = None) -> tuple:
@@ -1015,8 +1031,11 @@ class _BilinearPair:
             forced = rows_ground * ground
             slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
         else:
-            g, rest, integral = ahead.on_grid()
-            F = F + (self._kernels(H) @ g).reshape(2 * self.n, GRID + 1)
+            g, rest, integral = ahead.on_grid(self._ground)
+            lags, first = self._kernels(H)
+            response = lags @ self._toeplitz
+            response += first * g[0]
+            F = F + response
             forced = rows_ground * rest
             rate = rate[:, None] + self._rows_gain * integral[1:]
             slack = 0.5 * dS * rate[rows] + forced[rows, 1:]

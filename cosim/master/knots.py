@@ -44,7 +44,10 @@ class GroundLookahead:
         self.node = node
         self.capacity = int(capacity)
         inst = node.instance
-        names = [n for k in range(1, self.capacity + 1) for n in (f"t_knot[{k}]", f"ag_knot[{k}]")]
+        # every slot, times then values (two slices of the FMU's arrays: one copy each, where the
+        # interleaved order of the buildings' inputs costs a Python loop over the knots)
+        names = [f"t_knot[{k}]" for k in range(1, self.capacity + 1)] + \
+                [f"ag_knot[{k}]" for k in range(1, self.capacity + 1)]
         self.port = inst.real_port(names)
         self.count = inst.integer_port(["n_knots"])
         self.width = float(base)
@@ -70,12 +73,12 @@ class GroundLookahead:
             t0 = self.t_end
             self.node.instance.do_step(t0, h)
             self.ground_steps += 1
-            n = int(self.count.get()[0])
+            n = self._knots(t0, t0 + h)
             if n < 2:
                 raise KnotsUnavailable(f"the ground motion's record needs more than {self.capacity} knots over "
                                        f"{h:g} s (a sampling interval below {h / (self.capacity - 1):.3g} s)")
-            raw = self.port.get_first(2 * n)
-            times, values = raw[0::2].copy(), raw[1::2].copy()
+            raw = self.port.values
+            times, values = raw[:n].copy(), raw[self.capacity:self.capacity + n].copy()
             times[0], times[-1] = t0, t0 + h          # the chunk's ends as the master computes them
             self.t_end = t0 + h
             self.chunks += 1
@@ -89,6 +92,24 @@ class GroundLookahead:
             self.values = np.concatenate((self.values[:keep], values))
             if n <= GROW_BELOW and self.width < self.max_chunk:
                 self.width = min(2.0 * self.width, self.max_chunk)
+
+    def _knots(self, t0: float, t1: float) -> int:
+        """Read every knot slot of the step ``[t0, t1]`` just taken (one fmi2GetReal) and return
+        ``n_knots``.
+
+        The step's first knot is at its start and its last at its end, ``t_knot[n_knots] =
+        current_time + step_size`` (ground_motion.fmu computes that sum as the master does,
+        ``t1``, bit for bit); every knot before the last lies earlier (inside knots end ``SNAP``
+        before it: fmu_src/record_knots.py), so ``n_knots`` is one more than the first slot after
+        the first that holds ``t1`` (tests/test_knots.py): no fmi2GetInteger.  Otherwise (no
+        knots, ``n_knots = 0``: every slot 0; an FMU whose ends differ by round-off) ``n_knots``
+        is read."""
+        times = self.port.get()[:self.capacity]
+        at_end = times[1:] == t1
+        last = int(at_end.argmax())     # the first True (0 if none)
+        if at_end[last] and times[0] == t0:
+            return last + 2
+        return int(self.count.get()[0])
 
     def drop_before(self, t: float) -> None:
         """Forget the knots before the last one at or before ``t`` (the current step's start)."""
