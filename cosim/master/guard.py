@@ -251,24 +251,6 @@ class StabilityGuard:
         # substeps_total after the previous step (the step's internal steps are the difference)
         self._total_seen = [system.y.item(lv.i_substeps_total) if lv.i_substeps_total >= 0 else 0.0
                             for lv in self.levels]
-        # every contact resolved, with its impacts and substeps_total: the per-contact checks as a
-        # few array operations over all contacts (8 on kasai_maison) instead of a loop of scalar
-        # reads; they decide as the loop does (:meth:`_levels_fast`, :meth:`_work_fast`)
-        n = len(self.levels)
-        self._fast = bool(n) and all(lv.resolved and lv.j_impacts >= 0 and lv.i_substeps_total >= 0
-                                     for lv in self.levels)
-        if self._fast:
-            L = self.levels
-            self._gather = np.array([lv.i_substeps_total for lv in L] + [lv.i_F for lv in L] +
-                                    [lv.i_delta for lv in L] + [lv.i_Ediss for lv in L], dtype=np.intp)
-            self._j_impacts = np.array([lv.j_impacts for lv in L], dtype=np.intp)
-            self._stored0_array = np.array(self._stored0)
-            self._impacts = np.zeros(n, dtype=np.int64)
-            self._substeps = np.zeros(n)                 # exact integers (float64: to 2^53)
-            self._since = np.zeros(n, dtype=np.int64)
-            self._onset = np.zeros(n)
-            self._touching = np.zeros(n, dtype=bool)
-            self._total_seen = np.array(self._total_seen)
 
     def watched_columns(self) -> list[str]:
         """The Real outputs the guard reads after every step."""
@@ -286,7 +268,6 @@ class StabilityGuard:
         E = self.E_avail
         self._limits = [self.penetration_factor * ((lv.law.n + 1.0) * E / lv.law.k) ** (1.0 / (lv.law.n + 1.0))
                         + 1e-12 for lv in self.levels]
-        self._limits_array = np.array(self._limits)
 
     def penetration_limit(self) -> list[float]:
         """Deepest credible penetration of each contact now (m)."""
@@ -318,18 +299,7 @@ class StabilityGuard:
             self.E_avail = E_in
             self._update_limits()
         tol = self.energy_tol * self.E_avail + 1e-9
-        if self._fast:
-            # every contact's penetration and dissipation in one gather; the loop below (which
-            # names the first problem) only if some contact may have one.  It passes over the
-            # sleeping contacts, which the gather does not: their values are those checked
-            # before against limits that only loosen, so they raise no flag the loop would not
-            n = len(self.levels)
-            got = y[self._gather]
-            flagged = bool((got[2 * n:3 * n] > self._limits_array).any()
-                           or (got[3 * n:] < -tol - self._stored0_array).any())
-        else:
-            got, flagged = None, True
-        for lv, limit, stored0 in (zip(self.levels, self._limits, self._stored0) if flagged else ()):
+        for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
             if lv.name in asleep:
                 continue
             delta = item(lv.i_delta)
@@ -365,46 +335,9 @@ class StabilityGuard:
             return InstabilityError(
                 f"t = {t:.6g} s: the buildings hold {mech:.3g} J, more than the {self.E_avail:.3g} J ever put "
                 f"in: {self._advice(lv, h)}", t, lv.name if lv else "", "energy")
-        return self._work_fast(t, h, got) if self._fast else self._work(t, h, asleep)
+        return self._work(t, h, asleep)
 
     # -- work ------------------------------------------------------------------------------------
-    def _work_fast(self, t: float, h: float, got: np.ndarray) -> InstabilityError | None:
-        """:meth:`_work` over every contact at once (``got``: :meth:`problem`'s gather of
-        ``substeps_total``, ``F``, ``delta``, ``E_dissipated`` of every contact).  A sleeping
-        contact needs no passing over here: not called, its counters, total and outputs are
-        unchanged (no new impact, no internal step, not touching before or now: it fell asleep
-        with no force and its gap open), so every update leaves it as it was."""
-        if self.max_steps is not None and self.steps > self.max_steps:
-            return self._work(t, h)
-        n = len(self.levels)
-        total, F, delta = got[:n], got[n:2 * n], got[2 * n:3 * n]
-        impacts = self.system.ints[self._j_impacts]
-        new = impacts != self._impacts
-        if new.any():                                # a new impact began in this step
-            for i in np.flatnonzero(new).tolist():
-                self._total_impacts += int(impacts[i]) - int(self._impacts[i])
-                self._impacts[i] = impacts[i]
-                self._substeps[i] = 0.0
-                self._since[i] = self.steps - 1
-                self._onset[i] = t
-        touching = (F != 0.0) | (delta >= 0.0)
-        # the internal steps of the step (of every doStep since the previous check), counted in
-        # steps that began or ended in contact (as _work)
-        self._substeps += np.where(touching | self._touching, total - self._total_seen, 0.0)
-        self._total_seen = total
-        self._touching = touching
-        over = self._substeps > MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * (self.steps - self._since)
-        if over.any():
-            i = int(over.argmax())
-            lv = self.levels[i]
-            steps_since = self.steps - int(self._since[i])
-            return InstabilityError(
-                f"{lv.name}: t = {t:.6g} s: the contact FMU has taken {int(self._substeps[i]):,} internal steps in "
-                f"{steps_since} communication steps since its impact at t = {self._onset[i]:.6g} s "
-                f"(limit {MAX_SUBSTEPS_PER_IMPACT:,} + {SUBSTEPS_PER_STEP} per step; a resolved impact takes "
-                f"40-90): {self._stuck(lv)}", t, lv.name, "work")
-        return self._refined(t, h, self._total_impacts)
-
     def _work(self, t: float, h: float, asleep: Container[str] = ()) -> InstabilityError | None:
         """Work that explodes (see the class docstring), or None (``asleep`` as :meth:`problem`)."""
         if self.max_steps is not None and self.steps > self.max_steps:
@@ -454,10 +387,6 @@ class StabilityGuard:
                     f"(limit {MAX_SUBSTEPS_PER_IMPACT:,} + {SUBSTEPS_PER_STEP} per step; a resolved impact takes "
                     f"40-90): {self._stuck(lv)}", t, lv.name, "work")
         self._total_impacts = total_impacts
-        return self._refined(t, h, total_impacts)
-
-    def _refined(self, t: float, h: float, total_impacts: int) -> InstabilityError | None:
-        """More refined communication steps than allowed for ``total_impacts`` impacts, or None."""
         refined = self.steps - t / self.base_step
         if self.levels:
             per_impact = MAX_REFINED_STEPS_PER_IMPACT[self._resolved]
