@@ -138,6 +138,12 @@ class Pounding(Fmi2Slave):
                  description="duration of the latest impact (elapsed, while in progress)"),
         Variable("substeps", type="Integer", start=0, **_OUT,
                  description="internal integration steps in the last doStep (cost counter)"),
+        Variable("substeps_total", start=0.0, unit="1", **_OUT,
+                 description="internal integration steps of every doStep so far (cost counter; a Real, exact "
+                             "to 2^53, so that a master reading only Real outputs can follow it)"),
+        Variable("t_separation", start=-1.0, unit="s", **_OUT,
+                 description="end of the communication step in which the latest contact ended (-1 before "
+                             "any): changes exactly when contacts_ended (and grazes) do"),
     )
     PRIVATE_STATE = ("_contact", "_watch", "_declared_from")
 
@@ -164,7 +170,7 @@ class Pounding(Fmi2Slave):
         saved = (self._contact.snapshot(), self._watch.snapshot(), self._declared_from) if discard else None
         self._declared_from = current_time if declared else None
         c = self._contact
-        started = c.started
+        started, ended = c.started, c.ended
         if self.resolve_impacts:
             out = c.step(delta, delta_dot, step_size, declared)
             F, impulse, substeps = out.mean_force, out.impulse, out.substeps
@@ -182,6 +188,7 @@ class Pounding(Fmi2Slave):
                 raise SlaveError(f"step of {step_size:.6g} s refused (on_implausible = 'discard'): {message}")
             self.log(f"{self.instance_name}: t = {current_time:.9g} s: {message}", Fmi2Status.warning)
         self.F, self.impulse, self.substeps = F, impulse, substeps
+        self.substeps_total += substeps
         if self.resolve_impacts:
             self.delta, self.delta_dot = c.delta_end, c.delta_dot_end
         else:
@@ -197,6 +204,8 @@ class Pounding(Fmi2Slave):
         self.contacts_ended = c.ended
         if c.started != started:
             self.t_onset = current_time + c.onset_offset
+        if c.ended != ended:
+            self.t_separation = current_time + step_size
         self.F_peak = c.impact_peak
         self.t_peak = self.t_onset + c.peak_delay()
         self.v_impact = c.v_imp

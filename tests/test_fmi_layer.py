@@ -163,3 +163,41 @@ def test_the_declared_interfaces_are_the_built_fmus(fmu_dir):
             else:
                 assert b[var].start == d[var].start, (name, var)
         assert dict(parameter_defaults(name)) == {v: d[v].start for v in d if d[v].causality == "parameter"}
+
+
+def test_unprototyped_step_calls_match_fmpy(building):
+    """The ports and doStep call the FMI functions without ctypes' argument conversion
+    (cosim/master/fmi.py ``_unchecked``): every port kind, whole and first-``count``, reads and
+    writes what fmpy's prototyped calls do, and a failing call's status still raises.  A count
+    or component passed as a C int would lose its upper half (a heap address): reads would fail
+    or return other variables."""
+    from ctypes import c_void_p
+
+    from cosim.master.fmi import HOT_CALLS
+
+    inst = building.instantiate("fast")
+    try:
+        assert inst.component > 2**32        # the upper half matters (64-bit heap address)
+        start(inst, **{"n_storeys": 3, "x0[1]": 0.01, "x0[2]": 0.02, "x0[3]": 0.04, "damping": "rayleigh"})
+        slave, vr = inst._slave, {n: inst.variable(n).value_reference for n in ("x[1]", "x[2]", "x[3]", "ag", "F[1]")}
+        real = inst.real_port(["x[3]", "x[1]", "x[2]"])
+        assert real.get().tolist() == slave.getReal([vr["x[3]"], vr["x[1]"], vr["x[2]"]]) == [0.04, 0.01, 0.02]
+        assert real.get_first(2).tolist() == [0.04, 0.01]
+        inputs = inst.real_port(["ag", "F[1]"])
+        inputs.values[:] = [0.5, 2.0e3]
+        inputs.set_first(1)
+        assert slave.getReal([vr["ag"], vr["F[1]"]]) == [0.5, 0.0]
+        inputs.set()
+        assert slave.getReal([vr["ag"], vr["F[1]"]]) == [0.5, 2.0e3]
+        count = inst.integer_port(["n_storeys"])
+        assert count.get().tolist() == [3]
+        inst.do_step(0.0, 0.01)
+        inst.do_step(0.01, 0.01)
+        assert inst.do_steps == 2
+        assert real.get().tolist() == slave.getReal([vr["x[3]"], vr["x[1]"], vr["x[2]"]])
+        assert set(inst.unchecked) == set(HOT_CALLS)
+        assert isinstance(inst.c_component, c_void_p) and inst.c_component.value == inst.component
+        with pytest.raises(FMUError):
+            inst.do_step(0.0, 0.01)          # a step that does not start at the current time
+    finally:
+        inst.free()

@@ -95,6 +95,7 @@ class _Level:
     j_substeps: int = -1        # contact output substeps (index into System.ints; -1: none)
     i_contact_time: int = -1    # contact output contact_time (s; -1: none)
     i_zeta_used: int = -1       # contact output zeta_used (-1: none)
+    i_substeps_total: int = -1  # contact output substeps_total (index into System.y; -1: none, j_substeps read)
 
     def in_contact_scale(self, delta: float, delta_dot: float, v_imp: float, fraction: float) -> float:
         """Longest step (s) the explicit force-law coupling can take in contact now.
@@ -175,7 +176,7 @@ def contact_levels(system: "System") -> list[_Level]:
                              index[out + "delta"], index[out + "F"], index[out + "v_impact"],
                              index[out + "E_dissipated"], float(p["CR"]), ints.get(out + "impacts", -1),
                              ints.get(out + "substeps", -1), index.get(out + "contact_time", -1),
-                             index.get(out + "zeta_used", -1)))
+                             index.get(out + "zeta_used", -1), index.get(out + "substeps_total", -1)))
     return levels
 
 
@@ -247,6 +248,9 @@ class StabilityGuard:
         self._since = [0] * len(self.levels)          # steps before the one of the latest onset
         self._onset = [0.0] * len(self.levels)
         self._touching = [False] * len(self.levels)   # in contact after the previous step
+        # substeps_total after the previous step (the step's internal steps are the difference)
+        self._total_seen = [system.y.item(lv.i_substeps_total) if lv.i_substeps_total >= 0 else 0.0
+                            for lv in self.levels]
 
     def watched_columns(self) -> list[str]:
         """The Real outputs the guard reads after every step."""
@@ -256,6 +260,8 @@ class StabilityGuard:
             out += [cols[i] for i in (lv.i_delta, lv.i_F, lv.i_vimp, lv.i_Ediss, lv.iv1, lv.iv2)]
             if lv.i_contact_time >= 0:       # named by the message of exploding work (_stuck)
                 out.append(cols[lv.i_contact_time])
+            if lv.i_substeps_total >= 0:     # the internal steps, without an fmi2GetInteger (_work)
+                out.append(cols[lv.i_substeps_total])
         return out
 
     def _update_limits(self) -> None:
@@ -353,15 +359,23 @@ class StabilityGuard:
                 self._substeps[i] = 0
                 self._since[i] = self.steps - 1
                 self._onset[i] = t
-            if lv.j_substeps < 0:
+            if lv.i_substeps_total >= 0:
+                # the internal steps of the step (of every doStep since the previous check: a
+                # contact woken from dormancy adds its catch-up steps), from the Real running
+                # total read with the step; steps that neither began nor ended in contact take
+                # none in the resolver (it counts only steps in contact) and add nothing
+                total = item(lv.i_substeps_total)
+                taken = total - self._total_seen[i]
+                self._total_seen[i] = total
+            elif lv.j_substeps >= 0:
+                # an FMU without substeps_total: its Integer ``substeps``, current after a step that
+                # began or ended in contact (Recorder.track reads the counters then, before the guard)
+                taken = ints.item(lv.j_substeps)
+            else:
                 continue
-            # A run reads a contact's Integer outputs only after a step that began or ended in
-            # contact (Recorder.track, called before the guard); after any other step its
-            # ``substeps`` is a stale value, and it took no internal step (the resolver counts
-            # only steps in contact), so such a step adds nothing.
             touching = item(lv.i_F) != 0.0 or item(lv.i_delta) >= 0.0
             if touching or self._touching[i]:
-                self._substeps[i] += ints.item(lv.j_substeps)
+                self._substeps[i] += int(taken)
             self._touching[i] = touching
             steps_since = self.steps - self._since[i]     # communication steps since the onset's
             allowed = MAX_SUBSTEPS_PER_IMPACT + SUBSTEPS_PER_STEP * steps_since

@@ -13,9 +13,14 @@ and keeps:
 * **peaks from every step**: the largest ``|x[i]|`` of every floor and ``|base_shear|`` of
   every building and the largest mean force ``F`` and penetration ``delta`` of every contact,
   with the time of the step end where each was reached, whatever the output interval;
-* **impact onsets**: every step in which a contact's ``impacts`` grew, as (start, end) times
-  (the counter is read after a step in which the contact had a force or a closed gap), and the
-  contact FMU's ``t_onset`` of its first impact;
+* **impact onsets**: every step in which a contact's ``impacts`` grew, as (start, end) times,
+  and the contact FMU's ``t_onset`` of its first impact.  The counters (``impacts``, ``grazes``,
+  ``contacts_ended``: one ``fmi2GetInteger``) are read only after a step that can have changed
+  them, told by Real outputs read with the step anyway (:data:`COUNTER_SIGNALS`): a contact
+  began (``t_onset`` moved), one ended (``t_separation`` moved) or the latest one reached
+  ``graze_depth`` (``delta_max`` crossed it), the three ways pounding.fmu changes a counter; a
+  contact FMU without ``t_separation`` is read after every step in which it had a force or a
+  closed gap, or the step after;
 * **every contact that ended** (``contacts_ended`` grew): the contact FMU's details of it, read
   with that step (``impacts.csv``: :func:`cosim.master.results.impact_table`);
 * **the final value** of every output (read once at the end), including the buildings' in-step
@@ -103,6 +108,34 @@ def impact_detail_columns(system: "System") -> list[str]:
     return [x for c in system.contacts for x in (column(c.name, v) for v in IMPACT_DETAILS) if x in have]
 
 
+#: a contact FMU's Real outputs that move in every step in which one of its counters does: a
+#: contact began (``t_onset``), ended (``t_separation``) or reached ``graze_depth``
+#: (``delta_max`` crossed it); the master reads the counters only then (:class:`Recorder`)
+COUNTER_SIGNALS = ("t_onset", "t_separation", "delta_max")
+
+
+def counters_may_have_moved(before: Sequence[float], now: Sequence[float], graze_depth: float) -> bool:
+    """Whether a contact's counters can have changed in a step, from its :data:`COUNTER_SIGNALS`
+    ``(t_onset, t_separation, delta_max)`` after the step before (``before``) and after this one
+    (``now``), and its ``graze_depth`` (m).  pounding.fmu moves a counter only when a contact
+    begins (``impacts`` at graze_depth 0: ``t_onset`` is set to its onset time, later than any
+    earlier onset), ends (``grazes``, ``contacts_ended``: ``t_separation`` is set to the end of the
+    step) or reaches ``graze_depth`` (``impacts``: ``delta_max``, reset to 0 at each onset, rises
+    from below it to at least it; a contact that began in the step moved ``t_onset`` already)."""
+    return now[0] != before[0] or now[1] != before[1] or before[2] < graze_depth <= now[2]
+
+
+def counter_signal_columns(system: "System") -> list[str]:
+    """The :data:`COUNTER_SIGNALS` of every contact that has them all (read after every step)."""
+    have = set(system.columns)
+    out = []
+    for c in system.contacts:
+        cols = [column(c.name, v) for v in COUNTER_SIGNALS]
+        if all(x in have for x in cols):
+            out += cols
+    return out
+
+
 class Recorder:
     """Rows at the output interval, peaks and impact onsets from every step (module docstring)."""
 
@@ -164,6 +197,15 @@ class Recorder:
                 self._ended[node.name] = (names.index("contacts_ended"), names.index("grazes"),
                                           [index[c] for c in details])
         self.impacts = {node.name: 0 for node, *_ in self._contacts}
+        # per contact with the counter signals: their places in y, graze_depth (m, as the
+        # instance has it) and the values after the previous step (start(), track())
+        signals = set(counter_signal_columns(system))
+        self._signals: dict[str, tuple[int, int, int, float]] = {}
+        for node, *_ in self._contacts:
+            cols = [column(node.name, v) for v in COUNTER_SIGNALS]
+            if all(c in signals for c in cols):
+                self._signals[node.name] = (*(index[c] for c in cols), float(node.spec.value("graze_depth")))
+        self._seen: dict[str, tuple[float, float, float]] = {}
         self._counts = {name: (0, 0) for name in self._ended}
         #: contact -> rows of impacts.csv for every contact that ended (None: not tracked)
         self.impact_rows: list[dict] | None = [] if self._ended else None
@@ -181,6 +223,9 @@ class Recorder:
         self._peak_time[:] = t0
         for node, i_impacts, i_F, i_delta in self._contacts:
             self.impacts[node.name] = int(node.integers.values[i_impacts])
+            if node.name in self._signals:
+                i_onset, i_sep, i_dmax, _ = self._signals[node.name]
+                self._seen[node.name] = (y.item(i_onset), y.item(i_sep), y.item(i_dmax))
             self._active[node.name] = y.item(i_F) != 0.0 or y.item(i_delta) >= 0.0
             if node.name in self._ended:
                 j_ended, j_grazes, _ = self._ended[node.name]
@@ -236,12 +281,22 @@ class Recorder:
                 self._peak_time[up] = t_end
         item = y.item
         was_active = self._active
+        signals, seen = self._signals, self._seen
         for node, i_impacts, i_F, i_delta in self._contacts:
             name = node.spec.name
             if name in asleep:
                 continue
-            active = item(i_F) != 0.0 or item(i_delta) >= 0.0
-            if active or was_active[name]:
+            signal = signals.get(name)
+            if signal is not None:
+                i_onset, i_sep, i_dmax, graze_depth = signal
+                now = (item(i_onset), item(i_sep), item(i_dmax))
+                read = counters_may_have_moved(seen[name], now, graze_depth)
+                seen[name] = now
+            else:
+                active = item(i_F) != 0.0 or item(i_delta) >= 0.0
+                read = active or was_active[name]
+                was_active[name] = active
+            if read:
                 ints = node.integers.get()
                 count = int(ints[i_impacts])
                 if count > self.impacts[name]:
@@ -251,7 +306,6 @@ class Recorder:
                     self.impacts[name] = count
                 if name in self._ended:
                     self._contact_ended(name, ints, t_end)
-            was_active[name] = active
 
     def _contact_ended(self, name: str, ints, t_end: float) -> None:
         """Rows of impacts.csv for the contacts of ``name`` that ended in the step ending at

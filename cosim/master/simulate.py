@@ -21,7 +21,7 @@ from threadpoolctl import threadpool_limits
 from .coupling import get_strategy
 from .fmi import FMUError
 from .guard import StabilityGuard
-from .recording import Recorder, impact_detail_columns, recorded_columns, tracked_columns
+from .recording import Recorder, counter_signal_columns, impact_detail_columns, recorded_columns, tracked_columns
 from .results import Cost, SimulationResult
 from .steplog import ContactWindowLog, LoggedContact, window_columns
 
@@ -110,7 +110,7 @@ def simulate(system: "System", strategy: str | type | None = None, stop_time: fl
         guard = StabilityGuard(system, max_steps=max_steps, base_step=step)
     recorder = Recorder(system, stop_time, output_interval, recorded_columns(system, record))
     watched = set(solver.watched_columns()) | set(tracked_columns(system)) | set(impact_detail_columns(system)) | \
-        set(window_columns(system))
+        set(counter_signal_columns(system)) | set(window_columns(system))
     if guard is not None:
         watched |= set(guard.watched_columns())
     system.watch(watched, set(recorder.columns))
