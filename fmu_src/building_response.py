@@ -251,6 +251,13 @@ def _drift(u: np.ndarray) -> np.ndarray:
     return d
 
 
+def _drift_rows(u: np.ndarray) -> np.ndarray:
+    """:func:`_drift` of every row of ``u`` (states by rows)."""
+    d = u.copy()
+    d[:, 1:] -= u[:, :-1]
+    return d
+
+
 def _floor_forces(V: np.ndarray) -> np.ndarray:
     """``D' V``: storey shears to floor forces (storey i acts on floors i-1 and i)."""
     out = V.copy()
@@ -589,6 +596,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             ag0 = ag[idx]
             slope = (ag[idx + 1] - ag[idx]) / lengths[idx]
             positive = lengths[idx].tolist()
+            if not positive:
+                return None                          # jumps only: nothing to batch
         shortest, longest = min(positive), max(positive)
         if longest > 1.5 * shortest:
             # a long interval or a sliver, split or merged before any map is made for it
@@ -657,10 +666,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 else:     # every storey elastic: np.where's first branch, fewer operations
                     margin = self.dy - np.abs(out[:, n:two_n] - state.slip) - bound[:, n:two_n]
                 if not margin.min() > 0.0:
-                    # the group's first interval that an event may end (the groups' intervals ascend)
-                    taken = min(taken, js[int((~(margin.min(axis=1) > 0.0)).argmax())])
-                    if taken == 0:
-                        return None
+                    # the intervals tier 1 leaves go to the chord test (both ends are known here);
+                    # the group's first interval that neither clears may hold an event (the
+                    # groups' intervals ascend)
+                    left = (~(margin.min(axis=1) > 0.0)).nonzero()[0]
+                    if js[int(left[0])] < taken:
+                        unclear = left[~self._chord_quiet(cfg, state, elastic, yielding, out[left], Y, z, js, left,
+                                                          positive)]
+                        if unclear.size:
+                            taken = min(taken, js[int(unclear[0])])
+                            if taken == 0:
+                                return None
             tested.append((js, smap, Yg, out, bound))
         if taken < count:
             # the step goes on from the start of interval `taken` (its start state is Y's row)
@@ -734,6 +750,45 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         state.v = z[n:]
         last = times.size - 1
         return cost, times, ag, (last if count == len(maps) else count if knots is None else knots[count])
+
+    def _chord_quiet(self, cfg, state, elastic, yielding, out, Y, z_end, js, rows, lengths) -> np.ndarray:
+        """For the intervals ``js[rows]`` of a batch (:meth:`_advance_batch`; ``out`` their tier-1
+        rows, ``Y`` every interval's ``y`` row, ``z_end`` the last one's end state, ``lengths``
+        (s) every interval's): True where no storey can change state in the interval, proven
+        from its exact solution at both ends (the batch knows them) and a bound of the next
+        derivative: tighter than tier 1 and than :meth:`_second_order_quiet`, which start from
+        one end.
+
+        On ``[0, L]`` a function whose second derivative is at most ``B`` in size stays within
+        ``B t (L - t) / 2 <= B L^2 / 8`` of its chord: an elastic storey's ``e = d - s`` within
+        ``[min(e0, e1) - B2 L^2 / 8, max(e0, e1) + B2 L^2 / 8]``, a yielding storey's ``mode d'``
+        above ``min(g0, g1) - B3 L^2 / 8``, with ``B2`` and ``B3`` the bounds of the drifts' second
+        and third derivatives (:meth:`Configuration.drift_curvature_rows` with the growth
+        factor, as :meth:`_second_order_quiet`).  Margins: that test's yield limits (``1e-12``
+        of ``dy``) and ``1e-12`` of the drift rates' end values (the chained end states carry
+        round-off of ~1e-16 of the floors' velocities)."""
+        n = self.n
+        M, Ra, Rb = cfg.drift_curvature_rows()
+        which = np.asarray(js)[rows]
+        L = np.asarray(lengths, dtype=float)[which]
+        bound = np.abs(out[:, 4 * n:8 * n]) @ M.T
+        bound += np.abs(out[:, 8 * n])[:, None] * (L[:, None] * Ra + Rb)
+        bound *= (0.125 * L * L * np.exp(cfg.growth_rate * L))[:, None]
+        # the states at both ends: interval j starts at Y[j] and ends at Y[j + 1] (z_end for the last)
+        ends = np.empty((rows.size, 2 * n))
+        last = Y.shape[0] - 1
+        for k, j in enumerate(which.tolist()):
+            ends[k] = Y[j + 1, :2 * n] if j < last else z_end[:2 * n]
+        limit, low = self._second_order_limits
+        e0 = out[:, n:2 * n] - state.slip
+        e1 = _drift_rows(ends[:, :n]) - state.slip
+        quiet = (np.maximum(e0, e1) + bound[:, :n] < limit) & (np.minimum(e0, e1) - bound[:, :n] > low)
+        if yielding:
+            g0 = state.mode * out[:, 3 * n:4 * n]
+            g1 = state.mode * _drift_rows(ends[:, n:])
+            moving = np.minimum(g0, g1) - bound[:, n:] > 1e-12 * (np.abs(g0) + np.abs(g1))
+            quiet = np.where(elastic, quiet, moving)
+        return quiet.all(axis=1)
 
     def _uniform_elastic_batch(self, state, times, ag, p, force, cfg, smap, count):
         """:meth:`_advance_batch` of a linear building's step of intervals of one length and no

@@ -336,3 +336,114 @@ def test_eigen_is_scipy_eig_bit_for_bit():
     A[0, 0] = np.nan
     with pytest.raises(ValueError):
         _eigen(A)
+
+
+def test_chord_event_test_never_clears_an_interval_with_an_event(monkeypatch):
+    """ExactPiecewiseLinear._chord_quiet (the batch's test of the intervals tier 1 leaves, from
+    both ends of each) in a yielding run (3 storeys, ductility about 3 under El Centro at 0.3 g,
+    steps of 8 record intervals) against the modal solution sampled densely: an interval it
+    clears has every elastic storey inside its elastic range and every yielding storey moving
+    in its yield direction throughout; it meets real events among the intervals it is asked
+    about, and clears a good part of them (it is what lets the batch go on)."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    from fmu_src.ground_records import load_record
+    from fmu_src.hysteresis import StoreyHysteresis
+    from fmu_src.record_knots import step_knots
+    rec = load_record("elcentro1940")
+    rec = rec.scaled(0.3 * 9.80665 / rec.pga)
+    n = 3
+    b = ShearBuilding.from_period(0.5, [3e5] * n, [1.0] * n, 0.05)
+    fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
+    it = ExactPiecewiseLinear(b, StoreyHysteresis("bilinear", fy, 0.05))
+    asked = []
+    plain = ExactPiecewiseLinear._chord_quiet
+
+    def watched(self, cfg, state, elastic, yielding, out, Y, z_end, js, rows, lengths):
+        quiet = plain(self, cfg, state, elastic, yielding, out, Y, z_end, js, rows, lengths)
+        for k, j in enumerate(np.asarray(js)[rows].tolist()):
+            asked.append((cfg, Y[j].copy(), float(lengths[j]), state.mode.copy(), state.slip.copy(), bool(quiet[k])))
+        return quiet
+    monkeypatch.setattr(ExactPiecewiseLinear, "_chord_quiet", watched)
+    state = it.initial_state(np.zeros(n), np.zeros(n))
+    h = 0.16                                   # 8 intervals of the record's 0.02 s
+    for i in range(60):
+        kt, ka = step_knots(rec, h * i, h * (i + 1))
+        it.advance(state, kt - h * i, ka, np.zeros(n))
+    assert float(np.max(state.peak_drift / it.dy)) > 2.0          # it yields
+    cleared = events = 0
+    for cfg, y, length, mode, slip, quiet in asked:
+        seg = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+        ts = np.linspace(0.0, length, 401)
+        z = cfg.state_at(seg.q0, seg.beta0, seg.beta1, ts)            # (2n, 401)
+        d = np.diff(np.vstack([np.zeros((1, ts.size)), z[:n]]), axis=0)
+        dv = np.diff(np.vstack([np.zeros((1, ts.size)), z[n:]]), axis=0)
+        ok = True
+        for i in range(n):
+            if mode[i] == 0:
+                ok &= bool(np.all(np.abs(d[i] - slip[i]) < it.dy[i]))
+            else:
+                ok &= bool(np.all(mode[i] * dv[i, 1:] > 0.0))
+        if not ok:
+            events += 1
+            assert not quiet
+        cleared += quiet
+    assert len(asked) > 50 and events > 5        # the test meets real events
+    assert cleared > 0.2 * len(asked)
+
+
+@pytest.mark.parametrize("mode", [(0, 0, 0), (1, 0, -1)])
+def test_chord_event_test_holds_where_an_interval_peaks_inside(mode):
+    """ExactPiecewiseLinear._chord_quiet on single intervals built to peak inside (random states
+    scaled so that the largest |d - s| over the interval is 0.9 to 1.1 dy, intervals of 0.02 to
+    0.1 s), against the modal solution sampled densely: every interval it clears is free of
+    events, and among the samples are intervals whose ends are inside the elastic range (or
+    whose ends move in the yield direction) but whose interior is not: only the curvature term
+    keeps the test from clearing those (dropping it fails this test)."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    from fmu_src.hysteresis import StoreyHysteresis
+    n = 3
+    b = ShearBuilding.from_period(0.5, [3e5] * n, [1.0] * n, 0.05)
+    fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
+    it = ExactPiecewiseLinear(b, StoreyHysteresis("bilinear", fy, 0.05))
+    mode = np.array(mode, dtype=np.int64)
+    elastic = mode == 0
+    cfg = it.configuration(mode)
+    rng = np.random.default_rng(11)
+    ends_only = cleared = 0
+    for trial in range(1000):
+        L = float(rng.uniform(0.01, 0.06))
+        smap = cfg.segment_map(L)
+        tier1 = it._batch_plan(smap)[1]
+        slip = np.where(elastic, rng.normal(size=n) * 0.2 * it.dy, 0.0)
+        # drift rates of about dy w1, a yielding storey's biased to its yield direction
+        rates = rng.normal(size=n) * it.dy * 12.0
+        rates[~elastic] = mode[~elastic] * it.dy[~elastic] * 12.0 * rng.uniform(-0.2, 1.0, size=int((~elastic).sum()))
+        y = np.concatenate([rng.normal(size=n) * it.dy, np.cumsum(rates),
+                            [rng.normal() * 2.0, rng.normal() * (300.0 if trial % 2 else 3000.0)], np.zeros(n)])
+        seg = ModalSegment(cfg, y[:2 * n], y[2 * n:])
+        ts = np.linspace(0.0, L, 801)
+        z = cfg.state_at(seg.q0, seg.beta0, seg.beta1, ts)
+        d = np.diff(np.vstack([np.zeros((1, ts.size)), z[:n]]), axis=0)
+        e = d - slip[:, None]
+        scale = float(rng.uniform(0.6, 1.1)) / np.max(np.abs(e[elastic]) / it.dy[elastic, None])
+        y[:2 * n] *= scale                     # the response is linear in the state (no forcing below)
+        y[2 * n:] *= scale
+        slip = slip * scale
+        z *= scale
+        state = it.initial_state(np.zeros(n), np.zeros(n))
+        state.mode, state.slip = mode, slip
+        Y = y[None, :]
+        out = Y @ tier1.T
+        quiet = bool(it._chord_quiet(cfg, state, elastic, bool(mode.any()), out, Y, smap.state @ y, [0],
+                                     np.array([0]), [L])[0])
+        d = np.diff(np.vstack([np.zeros((1, ts.size)), z[:n]]), axis=0)
+        dv = np.diff(np.vstack([np.zeros((1, ts.size)), z[n:]]), axis=0)
+        inside = np.abs(d - slip[:, None]) < it.dy[:, None]
+        moving = mode[:, None] * dv > 0.0
+        ok = np.where(elastic[:, None], inside, moving)
+        if not ok.all():
+            assert not quiet, trial
+            ends_only += bool(ok[:, [0, -1]].all())
+        cleared += quiet
+    assert cleared > 0
+    assert ends_only >= 5          # intervals only the curvature term refuses

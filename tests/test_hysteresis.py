@@ -734,7 +734,8 @@ def test_a_yielding_knot_step_equals_its_intervals_one_by_one(monkeypatch):
     """A bilinear building's steps of 15 record intervals (the batch up to the first interval
     where an event may occur, the rest interval by interval) against one call per interval:
     the same states, yield patterns, slips, energies and peaks to round-off.  The run must
-    contain steps that the batch takes only in part, and steps in which it takes nothing."""
+    contain steps that the batch takes only in part, and steps in which it takes nothing (fewer
+    since the batch clears intervals by their chords too: 2 of 40, 13 partial)."""
     import fmu_src.building_response as response
     taken = []
     batch = response.ExactPiecewiseLinear._advance_batch
@@ -761,7 +762,7 @@ def test_a_yielding_knot_step_equals_its_intervals_one_by_one(monkeypatch):
         for j in range(kt.size - 1):
             short_it.advance(s, [0.0, kt[j + 1] - kt[j]], [ka[j], ka[j + 1]], force)
     partial = sum(1 for t in taken if t is not None and 0 < t[0] < t[1])
-    assert events > 20 and partial > 3 and taken.count(None) > 3, (events, partial, taken.count(None))
+    assert events > 20 and partial > 3 and taken.count(None) >= 2, (events, partial, taken.count(None))
     long_it.resolve_peaks(a)
     short_it.resolve_peaks(s)
     np.testing.assert_array_equal(a.mode, s.mode)
