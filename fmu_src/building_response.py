@@ -66,8 +66,9 @@ from scipy.optimize import brentq
 
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorSegment,
-                              canonical_length, first_root, hermite_range_scalar, hermite_ranges, max_abs)
+from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorScan,
+                              TaylorSegment, canonical_length, first_root, hermite_range_scalar, hermite_ranges,
+                              max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -1096,7 +1097,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             y = np.concatenate((state.u, state.v, (ag0 + ag1 * s, ag1), p))
             w = y[2 * n:]
             z0 = y[:2 * n]
-            segment = None
+            segment = poly = None
             e_damp = e_in = None
             change = None
             if s == 0.0 and (not inelastic or self._worth_a_map(cfg, rem, not yielding)):
@@ -1117,8 +1118,13 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # after an event, the rest of the interval, or a yield pattern met only briefly
                 # so far (only a yielding building has either)
                 segment = TaylorSegment(cfg, z0, w, rem)
-                z1 = segment.state(rem)
-                scan_vector = cfg.scan_vector(z0, z1, w, rem)
+                if TaylorScan.fits(cfg, rem):
+                    # the end state and the scan from the Taylor coefficients
+                    poly = TaylorScan(segment)
+                    z1, scan_vector = poly.state_and_scan(rem)
+                else:
+                    z1 = segment.state(rem)
+                    scan_vector = cfg.scan_vector(z0, z1, w, rem)
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
             peak_flags = unload_flags = up_flags = down_flags = None
@@ -1169,12 +1175,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             if event is not None:
                 stop = event[0]
                 if stop > 0.0:
-                    z1 = segment.state(stop)
-                    scan = Scan(cfg, cfg.scan_vector(z0, z1, w, stop), ag1, stop)
+                    if poly is None and TaylorScan.fits(cfg, rem):
+                        poly = TaylorScan(segment)
+                    if poly is not None:
+                        z1, scan_vector = poly.state_and_scan(stop)
+                    else:
+                        z1 = segment.state(stop)
+                        scan_vector = cfg.scan_vector(z0, z1, w, stop)
+                    scan = Scan(cfg, scan_vector, ag1, stop)
                 e_damp = None
             if stop > 0.0:
                 if e_damp is None:
-                    e_damp, e_in = segment.energies(w, stop)
+                    e_damp, e_in = (poly or segment).energies(w, stop)
                 self._peaks(cfg, scan, segment, state, y, p, stop, xtol, cost, peak_flags)
                 # (a storey whose |drift| tier 1 kept under its peak is covered as above)
                 if inelastic:

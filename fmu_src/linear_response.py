@@ -611,6 +611,14 @@ class Configuration:
             powers = self._taylor_powers[degree] = (P1[:, :degree - 1], P2[:, :degree - 1], k[:degree - 1], degree)
         return powers
 
+    def state_and_peak_modal(self) -> np.ndarray:
+        """``[V; peak_rows V]`` (5n x 2n, complex): the state and the tracked functions from modal
+        coordinates in one product (:class:`TaylorScan`).  Made once per configuration."""
+        rows = getattr(self, "_state_and_peak_modal", None)
+        if rows is None:
+            rows = self._state_and_peak_modal = np.ascontiguousarray(np.vstack((self.V, self.peak_modal)))
+        return rows
+
     def drift_curvature_rows(self):
         """``(M, Ra, Rb)`` for second-order bounds of the storey drifts ``d = D u`` over a segment.
 
@@ -797,6 +805,60 @@ class ModalSegment:
         return b4, b5
 
 
+class TaylorScan:
+    """A short segment's state and :class:`Scan` vector at any ``s`` in ``[0, L]``, and its energy
+    integrals, from the real Taylor coefficients of the state and of the tracked functions: its
+    :class:`TaylorSegment`'s modal columns mapped once by ``[V; F V]``
+    (:meth:`Configuration.state_and_peak_modal`), then a few small products per evaluation
+    (what :meth:`TaylorSegment.state`, :meth:`Configuration.scan_vector` and
+    :meth:`TaylorSegment.energies` compute, the same sums in another order: round-off apart).
+    What an ad hoc segment of a yielding building needs (``ExactPiecewiseLinear._interval``)."""
+
+    __slots__ = ("cfg", "Z", "F", "wd", "degree")
+
+    def __init__(self, segment: "TaylorSegment"):
+        cfg = segment.cfg
+        n = cfg.n
+        columns = segment.taylor()                 # (2n, degree + 1) complex: q^(k)(0) / k!
+        coefficients = (cfg.state_and_peak_modal() @ columns).real
+        self.cfg, self.degree = cfg, columns.shape[1] - 1
+        self.Z = coefficients[:2 * n]               # z(s) = Z @ [s^k]
+        self.F = coefficients[2 * n:]               # the tracked functions' coefficients (3n rows)
+        dq0 = columns[:, 1]                          # W z'(0)
+        self.wd = np.concatenate((dq0.real, dq0.imag))
+
+    @staticmethod
+    def fits(cfg: "Configuration", length: float) -> bool:
+        """Whether a segment of ``length`` s is short enough (:class:`TaylorSegment`'s polynomials)."""
+        return cfg.rate * length <= TAYLOR_MAX_SPAN
+
+    def state_and_scan(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(z(s), the scan vector of [0, s])``: what :meth:`Configuration.scan_vector` gives."""
+        K = self.degree
+        powers = np.cumprod(np.full(K + 1, s))
+        powers[1:] = powers[:-1]
+        powers[0] = 1.0
+        # the value, slope and curvature of every power at 0 and at s, as columns
+        P = np.zeros((K + 1, 6))
+        P[0, 0] = 1.0
+        P[:, 1] = powers
+        P[1, 2] = 1.0
+        P[1:, 3] = _DEGREES[1:K + 1] * powers[:-1]
+        P[2, 4] = 2.0
+        P[2:, 5] = _DEGREES2[2:K + 1] * powers[:-2]
+        G = self.F @ P                              # (3n, 6)
+        return self.Z @ powers, np.concatenate((G.T.ravel(), self.wd))
+
+    def energies(self, w: np.ndarray, length: float):
+        """:meth:`Configuration.energies` over ``[0, length]`` from the velocity coefficients."""
+        cfg = self.cfg
+        nodes, weights = cfg.chunk_nodes(length)
+        powers = np.ones((self.degree + 1, nodes.size))
+        powers[1:] = nodes
+        np.cumprod(powers, axis=0, out=powers)
+        return cfg.quadrature(self.Z[cfg.n:] @ powers, nodes, weights, w)
+
+
 class TaylorSegment(ModalSegment):
     """A :class:`ModalSegment` of known length ``L`` whose searches run on Python floats.
 
@@ -939,6 +1001,8 @@ class TaylorSegment(ModalSegment):
 TAYLOR_MAX_SPAN = 2.0        # max|lam| L up to which TaylorSegment evaluates by polynomial
 TAYLOR_TRUNCATION = 1e-17    # its truncation, relative to the modal amplitude of the derivative
 _TAYLOR_DERIVATIVES = 2      # the highest derivative the searches ask of a polynomial (g'')
+_DEGREES = np.arange(64, dtype=float)          # k, and k (k - 1): the powers' slopes and curvatures (TaylorScan)
+_DEGREES2 = _DEGREES * (_DEGREES - 1.0)
 
 
 def _taylor_degree(rho: float) -> int:

@@ -447,3 +447,34 @@ def test_chord_event_test_holds_where_an_interval_peaks_inside(mode):
         cleared += quiet
     assert cleared > 0
     assert ends_only >= 5          # intervals only the curvature term refuses
+
+
+@pytest.mark.parametrize("rho", [0.05, 0.5, 1.0, 2.0])
+def test_taylor_scan_equals_the_segment_and_its_scan_vector(rho):
+    """TaylorScan (an ad hoc segment's end state, scan vector and energies from its real Taylor
+    coefficients) against TaylorSegment.state, Configuration.scan_vector and
+    TaylorSegment.energies, at the segment's end and inside it (where an event cuts it): within
+    1e-13 of each vector's largest entry and 1e-12 of the energies' magnitudes (round-off: the
+    same sums in another order)."""
+    from fmu_src.linear_response import TaylorScan
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = rho / cfg.rate
+    assert TaylorScan.fits(cfg, length) and not TaylorScan.fits(cfg, 2.01 / cfg.rate)
+    rng = np.random.default_rng(9)
+    for trial in range(5):
+        z0 = rng.normal(size=2 * n) * np.concatenate([np.full(n, 0.02), np.full(n, 0.2)])
+        w = np.concatenate([[rng.normal() * 3.0, rng.normal() * 300.0], rng.normal(size=n) * 1e5])
+        segment = TaylorSegment(cfg, z0, w, length)
+        scan = TaylorScan(segment)
+        for s in (length, 0.37 * length):
+            z1, vector = scan.state_and_scan(s)
+            want_z = segment.state(s)
+            want = cfg.scan_vector(z0, want_z, w, s)
+            assert np.max(np.abs(z1 - want_z)) <= 1e-13 * np.max(np.abs(want_z))
+            assert np.max(np.abs(vector - want)) <= 1e-13 * np.max(np.abs(want))
+            got_e, want_e = scan.energies(w, s), segment.energies(w, s)
+            q0, b0, b1 = cfg.modal(z0, w)
+            size = np.abs(cfg.energies(q0, b0, b1, w, s))
+            for g, e, m in zip(got_e, want_e, size):
+                assert abs(g - e) <= 1e-12 * max(m, abs(e))
