@@ -31,7 +31,9 @@ step where nothing happens costs a few vector operations:
    ``|z'(0)|``) clears most segments at once: no storey can reach its limit, no function can
    pass its running peak; for the storeys it leaves, the same test to second order (the drift
    rates and accelerations with a bound of the next derivative,
-   :meth:`ExactPiecewiseLinear._second_order_quiet`);
+   :meth:`ExactPiecewiseLinear._second_order_quiet`; in a batch of intervals, whose end states
+   are all known, the chord through both ends with that bound,
+   :meth:`ExactPiecewiseLinear._chord_quiet`);
 2. for the functions it does not clear, cubic Hermite interpolation through the end values and
    slopes with a bound of the fourth derivative (:class:`~fmu_src.linear_response.Scan`);
 3. for the few left, bisection and bracketed Newton on the exact solution
@@ -41,8 +43,10 @@ step where nothing happens costs a few vector operations:
    for it).
 
 A yielding building meets many stiffness configurations (yield patterns), most of them for a
-few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`) until its
-``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length serves them.
+few intervals: a pattern's segments are evaluated ad hoc (:class:`TaylorSegment`, their end
+state and scan from its real Taylor coefficients, :class:`~fmu_src.linear_response.TaylorScan`)
+until its ``MAP_AFTER_SEGMENTS + 1``-th, from which its cached segment map of that length
+serves them.
 A linear building's step of one knot interval takes one product with a matrix made from the
 segment map of its length (:meth:`ExactPiecewiseLinear.ramp_step`, :class:`RampStep`): the end
 state, the outputs, the energy increments and tier 1 at once, with the decisions of the general
@@ -569,8 +573,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         matrix-vector product each (with the cached map of its length).  Then one matrix
         product per distinct length gives every interval's energies and tier-1 test quantities
         (:meth:`_interval` explains them): an elastic storey must stay inside its elastic range
-        and a yielding storey keep its drift rate's sign in every interval taken here (the
-        first interval that tier 1 cannot clear ends the batch: a step whose later intervals
+        and a yielding storey keep its drift rate's sign in every interval taken here, by tier 1
+        or, for the intervals it leaves, by the chord through both ends (:meth:`_chord_quiet`;
+        the first interval that neither clears ends the batch: a step whose later intervals
         yield keeps the batch's work on the quiet ones before, instead of redoing them one by
         one); only the intervals where a peak may grow are looked at one by one, and in them
         only the functions that tier 1 did not clear.  Same arithmetic as :meth:`_interval` per
@@ -647,7 +652,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 np.matmul(maps[j].state, Y[j], out=Y[j + 1, :two_n])
             z = maps[-1].state @ Y[-1]
         tested = []                      # (intervals, map, their rows, tier-1 values, bounds) of each group
-        taken = count                    # intervals before the first one tier 1 cannot clear of events
+        taken = count                    # intervals before the first one not cleared of events (tier 1, chords)
         for js in groups.values():
             smap = maps[js[0]]
             tier1, change = self._batch_plan(smap)[1:3]
