@@ -1385,20 +1385,21 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if elastic.any():
             shift = self._elastic_k * state.slip
             reach = np.abs(self.k * d[:count] - shift) + self.k * drift_reach
-            rows, storeys = ((reach > peak) & (elastic & state.yielded) & wanted).nonzero()
-            segments = {}
-            for j, i in zip(rows.tolist(), storeys.tolist()):
-                if not reach[j, i] > peak[i]:
-                    continue                          # a peak found in an earlier interval covers it
-                y = Y[j]
-                L = float(lengths[j])
-                segment = segments.get(j)
-                if segment is None:
-                    segment = segments[j] = TaylorSegment(cfg, y[:2 * n], y[2 * n:], L)
-                k = float(self.k[i])
-                peak[i], _ = max_abs(segment, k * cfg.peak_modal[n + i], -float(shift[i]), L, float(peak[i]),
-                                     PEAK_XTOL * L, min_width=EVENT_XTOL * L, budget=_ROOT_BUDGET,
-                                     atol=k * PEAK_ATOL[1])
+            flagged = (reach > peak) & (elastic & state.yielded) & wanted
+            if flagged.any():
+                # the intervals tier 1 leaves, one by one in order: _track_shear's tests on the
+                # interval's scan (its Hermite bounds, then the search), against the peak so far
+                state.peak_shear = peak
+                for j in flagged.any(axis=1).nonzero()[0].tolist():
+                    storeys = flagged[j] & (reach[j] > state.peak_shear)   # an earlier peak may cover it
+                    if not storeys.any():
+                        continue
+                    y = Y[j]
+                    L = float(lengths[j])
+                    scan = Scan(cfg, cfg.segment_map(L).scan @ y, float(y[2 * n + 1]), L)
+                    end = Y[j + 1] if j + 1 < count else z_end
+                    self._track_shear(state, cfg, y, end, L, scan=scan, storeys=storeys)
+                return
         state.peak_shear = peak
 
     def _commit(self, state, z1, force, e_damp, e_in, yielding=True):
