@@ -358,11 +358,13 @@ class Adaptive(CouplingStrategy):
         (``_kinematics``, read by :meth:`step`).  A closure later than ``_far`` is left out: it
         could change neither.  A time scale costs a few contact-law evaluations: each is
         computed only where it can change the answer."""
+        proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
+        if min(self._proven, default=proven) >= proven:            # every gap (most steps): no loop
+            return self.h_max, []
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
         closures = []
-        proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
         far = self._far
         for lv, until, (d, dd, ddd) in zip(self.levels, self._proven, self._kinematics):
             if until >= proven:
