@@ -231,6 +231,7 @@ class System:
         self.t0 = 0.0
         self.plan = ReadPlan()
         self._in_names: dict[str, list[str]] = {}
+        self._outputs: dict[str, tuple[int, list[str]]] = {}   # instance -> (offset in y, Real outputs)
         self.knots = 0              # knot capacity the buildings' input ports carry (0: none)
         created: list[InstanceProtocol] = []
         try:
@@ -292,6 +293,7 @@ class System:
             self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind,
                                    y=self.y, plan=self.plan))
             self._in_names[s.name] = in_names[s.name]
+            self._outputs[s.name] = (o, out_names[s.name])
         self.ground = [n for n in self.nodes if n.kind == "ground"]
         self.contacts = [n for n in self.nodes if n.kind == "contact"]
         self.buildings = [n for n in self.nodes if n.kind == "building"]
@@ -345,19 +347,19 @@ class System:
         """Read only ``watched`` Real columns after every step, and ``watched | recorded`` after
         a recorded one (:class:`ReadPlan`), each node in one fmi2GetReal; None: every output,
         as before any plan."""
-        index = {c: i for i, c in enumerate(self.columns[:self.y.size])}
         for n in self.nodes:
             if watched is None:
                 n.watched = n.watched_index = n.rows = n.rows_index = None
                 continue
-            mine = [c for c in self.columns[:self.y.size] if c.startswith(n.name + ".")]
-            variable = {c: c[len(n.name) + 1:] for c in mine}
-            w = [c for c in mine if c in watched]
-            r = [c for c in mine if c in watched or (recorded is not None and c in recorded)]
-            n.watched = n.instance.real_port([variable[c] for c in w])
-            n.watched_index = np.array([index[c] for c in w], dtype=np.intp)
-            n.rows = n.instance.real_port([variable[c] for c in r])
-            n.rows_index = np.array([index[c] for c in r], dtype=np.intp)
+            # the node's own columns (y[offset:offset + len(names)], in order), not every column
+            offset, names = self._outputs[n.name]
+            mine = [(offset + j, v, column(n.name, v)) for j, v in enumerate(names)]
+            w = [(i, v) for i, v, c in mine if c in watched]
+            r = [(i, v) for i, v, c in mine if c in watched or (recorded is not None and c in recorded)]
+            n.watched = n.instance.real_port([v for _, v in w])
+            n.watched_index = np.array([i for i, _ in w], dtype=np.intp)
+            n.rows = n.instance.real_port([v for _, v in r])
+            n.rows_index = np.array([i for i, _ in r], dtype=np.intp)
         self.plan.rows = True
 
     def use_knots(self, capacity: int) -> None:
