@@ -282,10 +282,10 @@ class Recorder:
         item = y.item
         was_active = self._active
         signals, seen = self._signals, self._seen
-        contacts = self._contacts
-        for node, i_impacts, i_F, i_delta in (contacts if not asleep else
-                                              [c for c in contacts if c[0].name not in asleep]):
+        for node, i_impacts, i_F, i_delta in self._contacts:
             name = node.name
+            if name in asleep:
+                continue
             signal = signals.get(name)
             if signal is not None:
                 i_onset, i_sep, i_dmax, graze_depth = signal

@@ -616,15 +616,15 @@ class Adaptive(CouplingStrategy):
     def _retry_step(self, start, h: float) -> float | None:
         """After a step of ``h``: the step to retry with (s) if a gap closed inside a step
         longer than that contact's contact step, else None."""
-        it = iter(self.system.y[self._level_reads].tolist())
+        item = self.system.y.item
         retry = None
-        for lv, (d0, dd0, _), x1, x2, v1, v2, _, _, _, _ in zip(self.levels, start, it, it, it, it, it, it, it, it):
+        for lv, (d0, dd0, _) in zip(self.levels, start):
             if d0 > 0.0:
                 continue
-            d1 = x1 - x2 - lv.gap                               # lv.kinematics(y), the same arithmetic
+            d1 = item(lv.ix1) - item(lv.ix2) - lv.gap          # lv.kinematics(y), the same arithmetic
             if d1 <= 0.0:
                 continue
-            dd1 = v1 - v2
+            dd1 = item(lv.iv1) - item(lv.iv2)
             v = max(dd0, dd1)
             h_contact = lv.in_contact_scale(0.0, v, v, self.contact_fraction)
             if h <= h_contact * (1.0 + 1e-9) or h <= self.h_min * (1.0 + 1e-9):
