@@ -128,6 +128,8 @@ class Dormancy:
         stats.setdefault("catch_up_steps", 0)
         stats.setdefault("catch_up_replays", 0)
         self.sleeping: dict[str, _Sleep] = {}
+        #: the journal's oldest needed row was looked for (commit) and no contact woke since
+        self._oldest_known = False
         self._retired: list[Any] = []               # states freed at the next commit
         self._i_impacts: dict[str, int] = {}
         #: per contact: the (position, velocity) input pairs ``x<i>``, ``v<i>`` for the Hermite
@@ -188,6 +190,7 @@ class Dormancy:
         sleep = self.sleeping.pop(node.name, None)
         if sleep is None:
             return
+        self._oldest_known = False
         self.stats["catch_ups"] += 1
         skipped = _Skipped(self, node, sleep.start, self._base + len(self._steps))
         tail = self._tail(node, skipped)
@@ -266,23 +269,27 @@ class Dormancy:
             self._free(inst, st)
         self._retired = []
         self.sleeping = dict(snapshot)
+        self._oldest_known = False
         del self._steps[snapshot.journal - self._base:]
         del self._sources[snapshot.journal - self._base:]
 
     def commit(self) -> None:
         """The step is accepted: free the states of the contacts that woke in it, and forget the
         journal's rows no sleeping contact needs."""
-        for inst, state in self._retired:
-            self._free(inst, state)
-        self._retired = []
+        if self._retired:
+            for inst, state in self._retired:
+                self._free(inst, state)
+            self._retired = []
         if not self.sleeping:
             if self._steps:
                 self._base += len(self._steps)
                 self._steps.clear()
                 self._sources.clear()
             return
-        if len(self._steps) < JOURNAL_TRIM:         # now and then, not at every step
+        if len(self._steps) < JOURNAL_TRIM or self._oldest_known:     # now and then, not at every step
             return
+        # the oldest sleep's first row only moves when a contact wakes (a new sleep starts later)
+        self._oldest_known = True
         first = min(s.start for s in self.sleeping.values()) - self._base
         if first >= JOURNAL_TRIM:
             del self._steps[:first]

@@ -237,7 +237,12 @@ class StabilityGuard:
         self.E_initial = sum(system.y.item(i) for i in self._i_mech) + sum(self._stored0)
         self.E_avail = self.E_initial
         self._limits = [0.0] * len(self.levels)
+        self._limits_stale = False      # E_avail grew since the limits were made (made when next needed)
         self._update_limits()
+        # the levels by name, and all of them: each check loops over the awake levels only
+        # (_awake: on kasai_maison 1-2 of 8 at most steps)
+        self._names = [lv.name for lv in self.levels]
+        self._everyone = list(range(len(self.levels)))
         #: largest communication step / impact time scale seen in contact, per plain-law contact
         self.step_over_time_scale = {lv.name: 0.0 for lv in self.levels if not lv.resolved}
         # per contact: impacts seen, internal steps and communication steps since the latest onset,
@@ -265,12 +270,15 @@ class StabilityGuard:
         return out
 
     def _update_limits(self) -> None:
+        self._limits_stale = False
         E = self.E_avail
         self._limits = [self.penetration_factor * ((lv.law.n + 1.0) * E / lv.law.k) ** (1.0 / (lv.law.n + 1.0))
                         + 1e-12 for lv in self.levels]
 
     def penetration_limit(self) -> list[float]:
         """Deepest credible penetration of each contact now (m)."""
+        if self._limits_stale:
+            self._update_limits()
         return list(self._limits)
 
     def problem(self, t: float, h: float, asleep: Container[str] = ()) -> InstabilityError | None:
@@ -297,11 +305,14 @@ class StabilityGuard:
             E_in += item(i)
         if E_in > self.E_avail:
             self.E_avail = E_in
-            self._update_limits()
+            self._limits_stale = True
         tol = self.energy_tol * self.E_avail + 1e-9
-        for lv, limit, stored0 in zip(self.levels, self._limits, self._stored0):
-            if lv.name in asleep:
-                continue
+        awake = self._awake(asleep)
+        if awake and self._limits_stale:       # only an awake level is checked against them
+            self._update_limits()
+        levels, limits, stored = self.levels, self._limits, self._stored0
+        for k in awake:
+            lv, limit, stored0 = levels[k], limits[k], stored[k]
             delta = item(lv.i_delta)
             if delta > limit:
                 return InstabilityError(
@@ -335,11 +346,19 @@ class StabilityGuard:
             return InstabilityError(
                 f"t = {t:.6g} s: the buildings hold {mech:.3g} J, more than the {self.E_avail:.3g} J ever put "
                 f"in: {self._advice(lv, h)}", t, lv.name if lv else "", "energy")
-        return self._work(t, h, asleep)
+        return self._work(t, h, asleep, awake)
+
+    def _awake(self, asleep: Container[str]) -> list[int]:
+        """The levels (indices, in order) not in ``asleep``."""
+        if not asleep:
+            return self._everyone
+        return [k for k, name in enumerate(self._names) if name not in asleep]
 
     # -- work ------------------------------------------------------------------------------------
-    def _work(self, t: float, h: float, asleep: Container[str] = ()) -> InstabilityError | None:
-        """Work that explodes (see the class docstring), or None (``asleep`` as :meth:`problem`)."""
+    def _work(self, t: float, h: float, asleep: Container[str] = (),
+              awake: list[int] | None = None) -> InstabilityError | None:
+        """Work that explodes (see the class docstring), or None (``asleep`` as :meth:`problem`;
+        ``awake``: the levels not in it, :meth:`_awake`, if known)."""
         if self.max_steps is not None and self.steps > self.max_steps:
             return InstabilityError(
                 f"t = {t:.6g} s: the run has taken {self.steps:,} communication steps, more than the limit of "
@@ -349,8 +368,10 @@ class StabilityGuard:
         ints = self.system.ints
         item = self.system.y.item
         total_impacts = self._total_impacts
-        for i, lv in enumerate(self.levels):
-            if lv.j_impacts < 0 or lv.name in asleep:
+        levels = self.levels
+        for i in (self._awake(asleep) if awake is None else awake):
+            lv = levels[i]
+            if lv.j_impacts < 0:
                 continue
             impacts = ints.item(lv.j_impacts)
             if impacts != self._impacts[i]:       # a new impact began in this step

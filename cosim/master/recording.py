@@ -283,7 +283,7 @@ class Recorder:
         was_active = self._active
         signals, seen = self._signals, self._seen
         for node, i_impacts, i_F, i_delta in self._contacts:
-            name = node.spec.name
+            name = node.name
             if name in asleep:
                 continue
             signal = signals.get(name)

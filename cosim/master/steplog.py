@@ -34,9 +34,6 @@ import numpy as np
 
 from .names import column, element_name
 
-#: ``ndarray.any`` without its Python wrapper (a window is looked for after every step)
-_ANY = np.logical_or.reduce
-
 if TYPE_CHECKING:
     from .system import System
 
@@ -217,14 +214,17 @@ class ContactWindowLog:
         self._buildings = _pounding_buildings(system) if self._forces else []
         self._rows: list[tuple] = []
         self._prev = system.y[self._index]      # the values at t0: made after initialisation
+        # the contact forces' places in y: looked at one by one (a few floats: cheaper than an
+        # array reduction), a NaN counted as a force as an array's ``any`` does
+        self._force_index = self._index[:self._forces].tolist()
         # whether a contact held a force at the end of the step before (kept, not looked for again)
-        self._prev_force = bool(self._forces and _ANY(self._prev[:self._forces]))
+        self._prev_force = any(map(system.y.item, self._force_index))
 
     def track(self, t0: float, t1: float) -> None:
         """The step ``[t0, t1]`` was accepted."""
-        now = self.system.y[self._index]
-        f = self._forces
-        force = bool(f and _ANY(now[:f]))
+        y = self.system.y
+        now = y[self._index]
+        force = any(map(y.item, self._force_index))
         held, self._prev_force = self._prev_force, force
         if force or held:
             inputs = []

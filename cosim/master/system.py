@@ -20,7 +20,7 @@ instances and connections) and ``simulate(system, ...)`` again.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
@@ -124,12 +124,13 @@ class Node:
     knots_set: int = -1         # n_knots the instance has now (set only when it changes)
     knot_ag: int = -1           # where the held ``ag`` input sits in the input port (-1: none)
     hold_mean: bool = False     # a step inside one record interval holds its mean (linear storeys)
-
-    @property
-    def name(self) -> str:
-        return self.spec.name
+    #: the instance's name (``spec.name``, which a :meth:`System.reset` keeps), an attribute: the
+    #: master's loops look it up for every contact at every step
+    name: str = field(init=False)
 
     def __post_init__(self) -> None:
+        self.name = self.spec.name
+        self._n_in = self.A.shape[0]            # coupling inputs (rows of A)
         # most inputs copy one output with a factor (+-1): a gather is much cheaper than A @ y
         A = self.A
         single = A.shape[0] and bool(np.all(np.count_nonzero(A, axis=1) == 1))
@@ -144,12 +145,13 @@ class Node:
 
     def pull(self, y: np.ndarray) -> None:
         """Set the inputs from the current outputs of the system."""
-        if self.A.shape[0]:
-            self._inputs(y, self.inputs.values[:self.A.shape[0]])
+        n_in = self._n_in
+        if n_in:
+            self._inputs(y, self.inputs.values[:n_in])
             if self.knot_count is None:
                 self.inputs.set()
             else:
-                self.inputs.set_first(self.A.shape[0])
+                self.inputs.set_first(n_in)
 
     def pull_with_knots(self, y: np.ndarray, knots: np.ndarray) -> None:
         """Set the inputs and the ground motion over the coming step, ``knots`` interleaved
@@ -165,19 +167,20 @@ class Node:
         response (second order in the step) is what kept ``kasai_maison_inelastic`` off the
         criteria at 10 ms: its relative floor velocity before the first impact was 0.22 % off
         the reference's at 10 ms, 0.05 % at 5 ms."""
-        n_in = self.A.shape[0]
-        buf = self.inputs.values
+        n_in = self._n_in
+        inputs = self.inputs
+        buf = inputs.values
         if n_in:
             self._inputs(y, buf[:n_in])
         size = knots.size
         if size == 4 and self.hold_mean:
-            buf[self.knot_ag] = 0.5 * (knots[1] + knots[3])
-            self.inputs.set_first(n_in)
+            buf[self.knot_ag] = 0.5 * (knots.item(1) + knots.item(3))
+            inputs.set_first(n_in)
             count = 0
         else:
             o = self.knot_offset
             buf[o:o + size] = knots
-            self.inputs.set_first(o + size)
+            inputs.set_first(o + size)
             count = size >> 1
         if count != self.knots_set:
             self.knot_count.set([count])
@@ -228,6 +231,7 @@ class System:
         self.t0 = 0.0
         self.plan = ReadPlan()
         self._in_names: dict[str, list[str]] = {}
+        self._outputs: dict[str, tuple[int, list[str]]] = {}   # instance -> (offset in y, Real outputs)
         self.knots = 0              # knot capacity the buildings' input ports carry (0: none)
         created: list[InstanceProtocol] = []
         try:
@@ -289,6 +293,7 @@ class System:
             self.nodes.append(Node(s, inst, outputs, integers, booleans, inputs, matrices[s.name], kind,
                                    y=self.y, plan=self.plan))
             self._in_names[s.name] = in_names[s.name]
+            self._outputs[s.name] = (o, out_names[s.name])
         self.ground = [n for n in self.nodes if n.kind == "ground"]
         self.contacts = [n for n in self.nodes if n.kind == "contact"]
         self.buildings = [n for n in self.nodes if n.kind == "building"]
@@ -342,19 +347,19 @@ class System:
         """Read only ``watched`` Real columns after every step, and ``watched | recorded`` after
         a recorded one (:class:`ReadPlan`), each node in one fmi2GetReal; None: every output,
         as before any plan."""
-        index = {c: i for i, c in enumerate(self.columns[:self.y.size])}
         for n in self.nodes:
             if watched is None:
                 n.watched = n.watched_index = n.rows = n.rows_index = None
                 continue
-            mine = [c for c in self.columns[:self.y.size] if c.startswith(n.name + ".")]
-            variable = {c: c[len(n.name) + 1:] for c in mine}
-            w = [c for c in mine if c in watched]
-            r = [c for c in mine if c in watched or (recorded is not None and c in recorded)]
-            n.watched = n.instance.real_port([variable[c] for c in w])
-            n.watched_index = np.array([index[c] for c in w], dtype=np.intp)
-            n.rows = n.instance.real_port([variable[c] for c in r])
-            n.rows_index = np.array([index[c] for c in r], dtype=np.intp)
+            # the node's own columns (y[offset:offset + len(names)], in order), not every column
+            offset, names = self._outputs[n.name]
+            mine = [(offset + j, v, column(n.name, v)) for j, v in enumerate(names)]
+            w = [(i, v) for i, v, c in mine if c in watched]
+            r = [(i, v) for i, v, c in mine if c in watched or (recorded is not None and c in recorded)]
+            n.watched = n.instance.real_port([v for _, v in w])
+            n.watched_index = np.array([i for i, _ in w], dtype=np.intp)
+            n.rows = n.instance.real_port([v for _, v in r])
+            n.rows_index = np.array([i for i, _ in r], dtype=np.intp)
         self.plan.rows = True
 
     def use_knots(self, capacity: int) -> None:

@@ -341,10 +341,10 @@ class Adaptive(CouplingStrategy):
         """Each level's kinematics ``(delta, rate, its rate)`` now (:meth:`_Level.kinematics`)
         and whether its contact has something to do: a force, a closed gap (its own, or the
         host's).  One loop over the levels, each read once per try."""
-        reads = self.system.y[self._level_reads].tolist()
+        it = iter(self.system.y[self._level_reads].tolist())
         kinematics, active = [], []
-        for k, gap in enumerate(self._level_gaps):
-            x1, x2, v1, v2, a1, a2, F, delta = reads[8 * k:8 * k + 8]
+        # zip over one iterator eight times: each level's eight reads in order, no slice made
+        for gap, x1, x2, v1, v2, a1, a2, F, delta in zip(self._level_gaps, it, it, it, it, it, it, it, it):
             d = x1 - x2 - gap
             kinematics.append((d, v1 - v2, a1 - a2))
             active.append(F != 0.0 or delta >= 0.0 or d >= 0.0)
@@ -358,11 +358,13 @@ class Adaptive(CouplingStrategy):
         (``_kinematics``, read by :meth:`step`).  A closure later than ``_far`` is left out: it
         could change neither.  A time scale costs a few contact-law evaluations: each is
         computed only where it can change the answer."""
+        proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
+        if min(self._proven, default=proven) >= proven:            # every gap (most steps): no loop
+            return self.h_max, []
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
         closures = []
-        proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
         far = self._far
         for lv, until, (d, dd, ddd) in zip(self.levels, self._proven, self._kinematics):
             if until >= proven:
@@ -464,8 +466,8 @@ class Adaptive(CouplingStrategy):
             h = t_next - t
             # a long step (level < 0) is proven free of closures; a step that _retry_step would
             # accept whatever closes in it needs no saved state
-            risky = 0 <= level < self.max_halvings and any(s < self.risk_factor * h and h > h_keep() * (1.0 + 1e-9)
-                                                          for s, h_keep in closures)
+            risky = bool(closures) and 0 <= level < self.max_halvings and any(
+                s < self.risk_factor * h and h > h_keep() * (1.0 + 1e-9) for s, h_keep in closures)
             if risky and saved is None:
                 saved = self._save()
             self._before(t_next)
@@ -490,10 +492,13 @@ class Adaptive(CouplingStrategy):
         self._tick = end_tick
         self._level = level
         self.h_last = h
+        stats = self.stats
         if level < 0:
-            self.stats["long_steps"] += 1
-        self.stats["h_min_used"] = min(self.stats["h_min_used"], h)
-        self.stats["h_max_used"] = max(self.stats["h_max_used"], h)
+            stats["long_steps"] += 1
+        if h < stats["h_min_used"]:
+            stats["h_min_used"] = h
+        if h > stats["h_max_used"]:
+            stats["h_max_used"] = h
         self.communication_steps += 1
         self.t = t_next
         if end_tick >= self._end_tick:
@@ -529,16 +534,21 @@ class Adaptive(CouplingStrategy):
         """Step every contact that may have something to do over ``[t, t + h]``; the others
         sleep (:mod:`cosim.master.dormancy`), proven open with the forces of those that step."""
         system, y, dormancy = self.system, self.system.y, self._dormancy
+        contacts = system.contacts
         t1 = t + h
-        pending = []
-        sleeping = dormancy.sleeping
-        for k, (active, node) in enumerate(zip(self._now_active, system.contacts)):
-            if active:
-                if node.name in sleeping:
-                    dormancy.wake(node)
-                node.step(y, t, h)
-            else:
-                pending.append(k)
+        active = self._now_active
+        if True in active:
+            pending = []
+            sleeping = dormancy.sleeping
+            for k, node in enumerate(contacts):
+                if active[k]:
+                    if node.name in sleeping:
+                        dormancy.wake(node)
+                    node.step(y, t, h)
+                else:
+                    pending.append(k)
+        else:                               # nothing to do anywhere (most steps): every contact pending
+            pending = list(range(len(contacts)))
         if not pending:                     # every contact stepped: nothing to prove or to skip
             return
         # a proof over this step spans its nominal length: t + h is a difference of sums of
@@ -546,12 +556,14 @@ class Adaptive(CouplingStrategy):
         # build its own tables (ModalBound._cached; 5 variants of 0.01 s on kasai_maison, ~1.4 ms
         # a run); the nominal length plus a round-off slack covers every one of them
         H = proof_horizon(h, self._nominal, self.h_max)
-        if pending and len(pending) == len(self.levels) and any(self._proven[k] < t1 for k in pending):
+        proven = self._proven
+        if len(pending) == len(proven) and min(proven) < t1:
             # no force anywhere: one proof for every gap, over a few base steps ahead (it holds
             # as long as it says: no gap closes before it ends, so no force appears)
             self._prove_quiet(t, min(max(H, QUIET_HORIZON * self.h_max), self.t_bound - t))
+            proven = self._proven           # a new list
         while pending:
-            doubtful = [k for k in pending if self._proven[k] < t1]
+            doubtful = [k for k in pending if proven[k] < t1]
             if not doubtful:
                 break
             ground = self._ground_bound(t, H)
@@ -563,22 +575,23 @@ class Adaptive(CouplingStrategy):
                 wake = [k for k, s in zip(doubtful, horizons) if s < h]
                 for k, s in zip(doubtful, horizons):
                     if s >= h:
-                        self._proven[k] = t1        # proven for this step only (with these forces)
+                        proven[k] = t1              # proven for this step only (with these forces)
             if not wake:
                 break
             for k in wake:
-                node = system.contacts[k]
+                node = contacts[k]
                 dormancy.wake(node)
                 node.step(y, t, h)
                 pending.remove(k)
-        dormancy.skip([system.contacts[k] for k in pending], t, h)
+        dormancy.skip([contacts[k] for k in pending], t, h)
 
     def _forces(self, sleeping: list[int]) -> dict:
         """Floor forces (N) of the contacts that stepped, per building, held over the step."""
         y = self.system.y
         forces: dict = {}
+        asleep = set(sleeping)
         for k, lv in enumerate(self.levels):
-            if k in sleeping:
+            if k in asleep:
                 continue
             F = y.item(lv.i_F)
             if F == 0.0:
