@@ -107,12 +107,9 @@ def test_taylor_segment_state_and_energies_equal_the_modal_ones(rho):
             assert g == pytest.approx(wv, rel=1e-12)
 
 
-def test_second_order_event_test_never_clears_a_segment_with_an_event(monkeypatch):
-    """ExactPiecewiseLinear._second_order_quiet in a yielding run (3 storeys, ductility about 3
-    under El Centro at 0.3 g, 10 ms steps) against the modal solution sampled densely: a segment
-    it clears has every elastic storey inside its elastic range and every yielding storey
-    moving in its yield direction throughout; and it clears a good part of the segments that
-    the first-order bound leaves (it is tighter)."""
+def _ductile_three_storeys():
+    """El Centro at 0.3 g and a 3-storey bilinear building (T1 = 0.5 s, yield shears 10 % down
+    to 4 % of the weight, 5 % hardening) that reaches a ductility of about 3 under it."""
     from fmu_src.building_response import ExactPiecewiseLinear
     from fmu_src.ground_records import load_record
     from fmu_src.hysteresis import StoreyHysteresis
@@ -121,7 +118,18 @@ def test_second_order_event_test_never_clears_a_segment_with_an_event(monkeypatc
     n = 3
     b = ShearBuilding.from_period(0.5, [3e5] * n, [1.0] * n, 0.05)
     fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
-    it = ExactPiecewiseLinear(b, StoreyHysteresis("bilinear", fy, 0.05))
+    return rec, b, ExactPiecewiseLinear(b, StoreyHysteresis("bilinear", fy, 0.05))
+
+
+def test_second_order_event_test_never_clears_a_segment_with_an_event(monkeypatch):
+    """ExactPiecewiseLinear._second_order_quiet in a yielding run (3 storeys, ductility about 3
+    under El Centro at 0.3 g, 10 ms steps) against the modal solution sampled densely: a segment
+    it clears has every elastic storey inside its elastic range and every yielding storey
+    moving in its yield direction throughout; and it clears a good part of the segments that
+    the first-order bound leaves (it is tighter)."""
+    from fmu_src.building_response import ExactPiecewiseLinear
+    rec, b, it = _ductile_three_storeys()
+    n = len(b.masses)
     calls = []
     plain = ExactPiecewiseLinear._second_order_quiet
 
@@ -346,15 +354,9 @@ def test_chord_event_test_never_clears_an_interval_with_an_event(monkeypatch):
     in its yield direction throughout; it meets real events among the intervals it is asked
     about, and clears a good part of them (it is what lets the batch go on)."""
     from fmu_src.building_response import ExactPiecewiseLinear
-    from fmu_src.ground_records import load_record
-    from fmu_src.hysteresis import StoreyHysteresis
     from fmu_src.record_knots import step_knots
-    rec = load_record("elcentro1940")
-    rec = rec.scaled(0.3 * 9.80665 / rec.pga)
-    n = 3
-    b = ShearBuilding.from_period(0.5, [3e5] * n, [1.0] * n, 0.05)
-    fy = 0.1 * n * 3e5 * 9.80665 * np.linspace(1.0, 0.4, n)
-    it = ExactPiecewiseLinear(b, StoreyHysteresis("bilinear", fy, 0.05))
+    rec, b, it = _ductile_three_storeys()
+    n = len(b.masses)
     asked = []
     plain = ExactPiecewiseLinear._chord_quiet
 
