@@ -263,6 +263,16 @@ def _drift_rows(u: np.ndarray) -> np.ndarray:
     return d
 
 
+def _state_and_scan(segment, poly, z0: np.ndarray, w: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """A segment's state at ``s`` and its :class:`~fmu_src.linear_response.Scan` vector over
+    ``[0, s]``: from its Taylor coefficients (``poly``, a :class:`TaylorScan`) where it has them,
+    else from its exact solution (``segment.state``, :meth:`Configuration.scan_vector`)."""
+    if poly is not None:
+        return poly.state_and_scan(s)
+    z1 = segment.state(s)
+    return z1, segment.cfg.scan_vector(z0, z1, w, s)
+
+
 def _floor_forces(V: np.ndarray) -> np.ndarray:
     """``D' V``: storey shears to floor forces (storey i acts on floors i-1 and i)."""
     out = V.copy()
@@ -1123,13 +1133,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # after an event, the rest of the interval, or a yield pattern met only briefly
                 # so far (only a yielding building has either)
                 segment = TaylorSegment(cfg, z0, w, rem)
-                if TaylorScan.fits(cfg, rem):
-                    # the end state and the scan from the Taylor coefficients
+                if TaylorScan.fits(cfg, rem):     # the end state and the scan from the Taylor coefficients
                     poly = TaylorScan(segment)
-                    z1, scan_vector = poly.state_and_scan(rem)
-                else:
-                    z1 = segment.state(rem)
-                    scan_vector = cfg.scan_vector(z0, z1, w, rem)
+                z1, scan_vector = _state_and_scan(segment, poly, z0, w, rem)
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
             peak_flags = unload_flags = up_flags = down_flags = None
@@ -1182,11 +1188,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if stop > 0.0:
                     if poly is None and TaylorScan.fits(cfg, rem):
                         poly = TaylorScan(segment)
-                    if poly is not None:
-                        z1, scan_vector = poly.state_and_scan(stop)
-                    else:
-                        z1 = segment.state(stop)
-                        scan_vector = cfg.scan_vector(z0, z1, w, stop)
+                    z1, scan_vector = _state_and_scan(segment, poly, z0, w, stop)
                     scan = Scan(cfg, scan_vector, ag1, stop)
                 e_damp = None
             if stop > 0.0:
