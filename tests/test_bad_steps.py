@@ -14,7 +14,7 @@ import math
 import pytest
 
 from fmu_src.fmi_slave import MAX_STEP, MIN_STEP
-from test_pounding_fmu import Host
+from test_pounding_fmu import module_host
 
 from fmpy.fmi1 import FMICallException  # noqa: E402
 
@@ -22,12 +22,7 @@ H = 1e-3
 OUTPUTS = ("F", "F1", "F2", "F_max", "E_dissipated", "delta", "delta_dot")
 
 
-@pytest.fixture(scope="module")
-def host(fmu_path, tmp_path_factory):
-    h = Host(fmu_path("pounding"), tmp_path_factory.mktemp("bad_steps"))
-    yield h
-    h.fmu.terminate()
-    h.fmu.freeInstance()
+host = module_host("bad_steps")
 
 
 def _approach(k):

@@ -20,17 +20,12 @@ from cosim.master.recording import counters_may_have_moved
 from scenario_checks import simulate_scene
 
 pytest.importorskip("fmpy")
-from test_pounding_fmu import Host  # noqa: E402
+from test_pounding_fmu import module_host  # noqa: E402
 
 COUNTERS = ("impacts", "grazes", "contacts_ended")
 
 
-@pytest.fixture(scope="module")
-def host(fmu_path, tmp_path_factory):
-    h = Host(fmu_path("pounding"), tmp_path_factory.mktemp("counters"))
-    yield h
-    h.fmu.terminate()
-    h.fmu.freeInstance()
+host = module_host("counters")
 
 
 def relative_motion(t: float) -> tuple[float, float]:

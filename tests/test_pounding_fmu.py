@@ -79,12 +79,19 @@ class Host:
         return self.fmu.getBoolean([self.vr[name]])[0]
 
 
-@pytest.fixture(scope="module")
-def host(fmu_path, tmp_path_factory):
-    h = Host(fmu_path("pounding"), tmp_path_factory.mktemp("pounding"))
-    yield h
-    h.fmu.terminate()
-    h.fmu.freeInstance()
+def module_host(tag: str):
+    """A module-scoped fixture: one pounding.fmu :class:`Host` for the module's tests (its
+    folder named after ``tag``), terminated and freed after them."""
+    @pytest.fixture(scope="module")
+    def host(fmu_path, tmp_path_factory):
+        h = Host(fmu_path("pounding"), tmp_path_factory.mktemp(tag))
+        yield h
+        h.fmu.terminate()
+        h.fmu.freeInstance()
+    return host
+
+
+host = module_host("pounding")
 
 
 def impact_run(host, model, CR, v, m1, m2, k, h, n=1.5, resolve=True, onset=0.37, extra_steps=3):
