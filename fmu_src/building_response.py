@@ -70,9 +70,9 @@ from scipy.optimize import brentq
 
 from .hysteresis import (StoreyHysteresis, bilinear_offset, bilinear_plastic_force,
                                 bilinear_strain_energy, bilinear_tangent)
-from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ModalSegment, Scan, SegmentMap, TaylorScan,
-                              TaylorSegment, canonical_length, first_root, hermite_range_scalar, hermite_ranges,
-                              max_abs)
+from .linear_response import (CHUNK_RATE, MAX_CHUNKS, Configuration, ConfigurationConstants, ModalSegment, Scan,
+                              SegmentMap, TaylorScan, TaylorSegment, canonical_length, first_root,
+                              hermite_range_scalar, hermite_ranges, max_abs)
 from .shear_building import ShearBuilding
 
 EVENT_XTOL = 1e-12          # relative to the step: events located to 1e-12 h
@@ -423,6 +423,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def __init__(self, building: ShearBuilding, hysteresis: StoreyHysteresis):
         super().__init__(building, hysteresis)
         self._configs: OrderedDict[bytes, Configuration] = OrderedDict()
+        # what every configuration shares (made once: a yield pattern builds only its own part)
+        self._cfg_constants = ConfigurationConstants(self.masses, self.C)
         self.configurations_built = 0   # cost counter
         # what a mode array implies, remembered for the array object last seen (a state's mode
         # is replaced, never changed in place): (mode, configuration, elastic mask, any yielding)
@@ -509,7 +511,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         cfg = self._configs.get(key)
         if cfg is None:
             tangent = bilinear_tangent(self.k, self.alpha, mode) if self._inelastic else self.k
-            cfg = Configuration(self.masses, self.C, tangent, elastic=not mode.any())
+            cfg = Configuration(self.masses, self.C, tangent, elastic=not mode.any(), constants=self._cfg_constants)
             if len(self._configs) >= MAX_CONFIGURATIONS:
                 self._configs.popitem(last=False)
             self._configs[key] = cfg

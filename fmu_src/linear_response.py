@@ -309,32 +309,90 @@ def _inverse(V: np.ndarray, elastic: bool) -> np.ndarray:
 _IMAGINARY_UNIT = np.array(1j, dtype="F")     # scipy.linalg.eig's, for its arithmetic of wr + i wi
 
 
-def _eigen(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _eigen(A: np.ndarray, constants: "ConfigurationConstants | None" = None) -> tuple[np.ndarray, np.ndarray]:
     """``(lam, V)`` of a real matrix as :func:`scipy.linalg.eig` computes them, bit for bit: its
     LAPACK ``geev`` with the same workspace, ``lam = wr + i wi`` and the complex eigenvectors of
     each conjugate pair assembled from ``geev``'s two real columns as it assembles them, with the
     pairs at once instead of a Python loop over them (a third of the 60 us that eig spends
     outside LAPACK for 15 storeys, at every new yield pattern).  A non-finite matrix, or a
-    LAPACK failure, goes through eig itself (its checks and errors)."""
-    geev, geev_lwork = get_lapack_funcs(("geev", "geev_lwork"), (A,))
-    if _compute_lwork is None or geev.typecode != "d" or not np.isfinite(A).all():
+    LAPACK failure, goes through eig itself (its checks and errors).  ``constants`` (of the
+    building whose state matrix ``A`` is) bring the routine and its workspace size, asked of
+    LAPACK once per building instead of at every configuration (the same size: it depends on
+    the matrix's order only)."""
+    if constants is not None and constants.geev is not None:
+        geev, lwork = constants.geev, constants.geev_workspace
+    else:
+        geev, geev_lwork = get_lapack_funcs(("geev", "geev_lwork"), (A,))
+        if _compute_lwork is None or geev.typecode != "d":
+            return eig(A)
+        lwork = _compute_lwork(geev_lwork, A.shape[0], compute_vl=0, compute_vr=1)
+    if not np.isfinite(A).all():
         return eig(A)
-    lwork = _compute_lwork(geev_lwork, A.shape[0], compute_vl=0, compute_vr=1)
     wr, wi, _, vr, info = geev(A, lwork=lwork, compute_vl=0, compute_vr=1, overwrite_a=0)
     if info != 0:
         return eig(A)
     lam = wr + _IMAGINARY_UNIT * wi
-    if np.all(lam.imag == 0.0):
+    # the pairs' tests on Python floats (the imaginary parts are wi's, their signs and zeros
+    # the same): the same decisions as eig's, without five numpy calls on a few elements
+    imag = wi.tolist()
+    if not any(imag):
         return lam, vr            # eig keeps real eigenvectors real
-    pair = lam.imag > 0
-    pair[:-1] |= lam.imag[1:] < 0   # eig's workaround for a LAPACK bug (scipy ticket #709)
-    first = np.flatnonzero(pair)
-    if first.size > 1 and (np.diff(first) == 1).any():
+    last = len(imag) - 1
+    # eig's pairs, with its workaround for a LAPACK bug (scipy ticket #709): a column is a pair's
+    # first where its imaginary part is positive or the next one's negative
+    first = [j for j, b in enumerate(imag) if b > 0.0 or (j < last and imag[j + 1] < 0.0)]
+    if any(b - a == 1 for a, b in zip(first, first[1:])):
         return eig(A)             # overlapping pairs: only eig's loop gives its result
+    first = np.array(first, dtype=np.intp)
     V = np.array(vr, dtype=complex)
     V.imag[:, first] = vr[:, first + 1]
     V[:, first + 1] = V[:, first].conj()
     return lam, V
+
+
+class ConfigurationConstants:
+    """What every stiffness configuration of one building shares (:class:`Configuration`): the
+    masses and the damping matrix, the damping's rows of the state matrix, the forcing
+    matrices, the rows of the tracked and watched functions that do not depend on the
+    stiffness, and LAPACK's ``geev`` with its workspace size for the building's order.  Made
+    once per building (``fmu_src.building_response.ExactPiecewiseLinear``) so that a new yield
+    pattern builds only what depends on its stiffness; the arrays are read, never written."""
+
+    __slots__ = ("n", "masses", "C", "damping_rows", "B0", "B1", "drift_rows", "peak_rows", "watch_rows",
+                 "geev", "geev_workspace")
+
+    def __init__(self, masses, damping_matrix):
+        m = np.asarray(masses, dtype=float)
+        n = m.size
+        self.n = n
+        self.masses = m
+        self.C = np.asarray(damping_matrix, dtype=float)
+        self.damping_rows = -self.C / m[:, None]             # A[n:, n:]
+        # forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w
+        B0 = np.zeros((2 * n, n + 2))
+        B0[n:, 0] = -1.0
+        B0[n:, 2:] = np.diag(1.0 / m)
+        B1 = np.zeros((2 * n, n + 2))
+        B1[n:, 1] = -1.0
+        self.B0, self.B1 = B0, B1
+        D = np.eye(n) - np.eye(n, k=-1)
+        self.drift_rows = D
+        # the tracked functions' rows (x, drift; the accelerations' rows are the state matrix's)
+        # and the watched ones' (those and the drift rates), without the stiffness' part
+        F = np.zeros((3 * n, 2 * n))
+        F[:n, :n] = np.eye(n)
+        F[n:2 * n, :n] = D
+        self.peak_rows = F
+        watch = np.zeros((4 * n, 2 * n))
+        watch[:3 * n] = F
+        watch[3 * n:, n:] = D
+        self.watch_rows = watch
+        self.geev = self.geev_workspace = None
+        if _compute_lwork is not None and n:
+            geev, geev_lwork = get_lapack_funcs(("geev", "geev_lwork"), (np.zeros((2 * n, 2 * n)),))
+            if geev.typecode == "d":
+                self.geev = geev
+                self.geev_workspace = _compute_lwork(geev_lwork, 2 * n, compute_vl=0, compute_vr=1)
 
 
 class Configuration:
@@ -350,22 +408,33 @@ class Configuration:
         earlier versions, see :func:`_inverse`)
     """
 
-    def __init__(self, masses, damping_matrix, tangent, max_maps: int = 64, elastic: bool = True):
-        m = np.asarray(masses, dtype=float)
-        n = m.size
+    def __init__(self, masses, damping_matrix, tangent, max_maps: int = 64, elastic: bool = True,
+                 constants: ConfigurationConstants | None = None):
+        if constants is None:
+            constants = ConfigurationConstants(masses, damping_matrix)
+        m = constants.masses
+        n = constants.n
         kt = np.asarray(tangent, dtype=float)
         self.n = n
         self.masses = m
-        self.C = np.asarray(damping_matrix, dtype=float)
+        self.C = constants.C
         self.tangent = kt
-        above = np.append(kt[1:], 0.0)
-        self.K = np.diag(kt + above) - np.diag(kt[1:], 1) - np.diag(kt[1:], -1)
+        # the tridiagonal K written in place: the values of diag(kt + [kt[1:], 0]) - diag(kt[1:], 1)
+        # - diag(kt[1:], -1) (x - 0 is x; 0 - k is -k, +0 for k = 0 as 0 - 0 - 0 gives)
+        K = np.zeros((n, n))
+        diagonal = kt.copy()
+        diagonal[:-1] += kt[1:]
+        K.flat[::n + 1] = diagonal
+        off = 0.0 - kt[1:]
+        K.flat[1::n + 1] = off
+        K.flat[n::n + 1] = off
+        self.K = K
         A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n] = -self.K / m[:, None]
-        A[n:, n:] = -self.C / m[:, None]
+        A.flat[n:n * (2 * n + 1):2 * n + 1] = 1.0           # A[:n, n:] = I
+        A[n:, :n] = -K / m[:, None]
+        A[n:, n:] = constants.damping_rows
         self.A = A
-        lam, V = _eigen(A)
+        lam, V = _eigen(A, constants)
         W = None
         if not elastic:
             # cond_2(V) <= |V|_F |W|_F: a basis that this cheap bound accepts needs no SVD (most
@@ -393,31 +462,29 @@ class Configuration:
         self.lam3 = self.lam_abs ** 3
         self.lam4 = self.lam_abs ** 4
         # columns |lam|^0 .. |lam|^4 (TaylorSegment._bound_parts scales them by a segment's amplitudes)
-        self.lam_powers = np.column_stack([np.ones_like(self.lam_abs), self.lam_abs, self.lam2, self.lam3, self.lam4])
-        self.rate = float(np.max(self.lam_abs)) if n else 0.0
-        self.growth_rate = max(0.0, float(np.max(lam.real)))   # > 0 only by round-off
-        # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w.
-        B0 = np.zeros((2 * n, n + 2))
-        B0[n:, 0] = -1.0
-        B0[n:, 2:] = np.diag(1.0 / m)
-        B1 = np.zeros((2 * n, n + 2))
-        B1[n:, 1] = -1.0
+        powers = np.empty((2 * n, 5))
+        powers[:, 0] = 1.0
+        powers[:, 1] = self.lam_abs
+        powers[:, 2] = self.lam2
+        powers[:, 3] = self.lam3
+        powers[:, 4] = self.lam4
+        self.lam_powers = powers
+        self.rate = max(self.lam_abs.tolist()) if n else 0.0
+        self.growth_rate = max(0.0, max(lam.real.tolist()))   # > 0 only by round-off
+        # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w (the building's, ConfigurationConstants).
+        B0, B1 = constants.B0, constants.B1
         self.B0, self.B1 = B0, B1
         self.WB0 = self.W @ B0
         self.WB1 = self.W @ B1
         self.ramp_abs = np.abs(self.WB1[:, 1])      # |modal b1| per unit ground-acceleration slope
         # Functionals whose peaks are tracked: floor displacement, storey drift, absolute
         # acceleration a = M^-1 (p - C v - Kt u) (its constant part p/m added by the caller).
-        D = np.eye(n) - np.eye(n, k=-1)
-        F = np.zeros((3 * n, 2 * n))
-        F[:n, :n] = np.eye(n)
-        F[n:2 * n, :n] = D
+        F = constants.peak_rows.copy()
         F[2 * n:, :] = A[n:, :]
         self.peak_rows = F
         # Rows watched by the cheap per-segment test: the tracked functions and the drift rates.
-        watch = np.zeros((4 * n, 2 * n))
-        watch[:3 * n] = F
-        watch[3 * n:, n:] = D
+        watch = constants.watch_rows.copy()
+        watch[2 * n:3 * n] = F[2 * n:]
         self.watch_rows = watch
         self.peak_modal = F @ V
         self.peak_modal_abs = np.abs(self.peak_modal)
