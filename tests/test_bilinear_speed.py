@@ -323,7 +323,7 @@ def test_eigen_is_scipy_eig_bit_for_bit():
     1 to 20 storeys, yielding storeys at 5 % stiffness, undamped to overdamped (real eigenvalues:
     eig then keeps real eigenvectors); a non-finite matrix is refused as eig refuses it."""
     from scipy.linalg import eig
-    from fmu_src.linear_response import _eigen
+    from fmu_src.linear_response import ConfigurationConstants, _eigen
     rng = np.random.default_rng(3)
     kinds = set()
     for _ in range(400):
@@ -339,11 +339,61 @@ def test_eigen_is_scipy_eig_bit_for_bit():
         A[n:, n:] = -C / m[:, None]
         (lam0, V0), (lam1, V1) = eig(A), _eigen(A)
         assert V0.dtype == V1.dtype and np.array_equal(lam0, lam1) and np.array_equal(V0, V1)
+        # with the building's LAPACK routine and workspace size (ConfigurationConstants)
+        lam2, V2 = _eigen(A, ConfigurationConstants(m, C))
+        assert V2.dtype == V0.dtype and lam2.tobytes() == lam0.tobytes() and V2.tobytes() == V0.tobytes()
         kinds.add(V1.dtype.kind)
     assert kinds == {"c", "f"}          # both kinds of basis met
     A[0, 0] = np.nan
     with pytest.raises(ValueError):
         _eigen(A)
+
+
+def test_configuration_with_shared_constants_is_the_configuration_bit_for_bit():
+    """A yield pattern's Configuration built from its building's ConfigurationConstants (the
+    arrays every pattern shares, made once) has the arrays that the construction of each
+    pattern from scratch gives (written out here as it was: K from np.diag, A by blocks, the
+    tracked and watched rows by blocks, |lam|'s powers by column_stack), byte for byte (signed
+    zeros included: a storey at zero tangent stiffness, alpha = 0); and so the same modal
+    solution and segment map."""
+    from fmu_src.linear_response import ConfigurationConstants
+    rng = np.random.default_rng(8)
+    for n, alpha in ((1, 0.05), (3, 0.0), (5, 0.05), (15, 0.05), (15, 0.0)):
+        b = ShearBuilding.from_period(0.8, rng.uniform(2e5, 5e5, n), rng.uniform(0.5, 1.0, n), 0.05)
+        shared = ConfigurationConstants(b.masses, b.C)
+        for trial in range(3):
+            kt = b.stiffnesses * np.where(rng.random(n) < 0.4, alpha, 1.0)
+            cfg = Configuration(b.masses, b.C, kt, elastic=False, constants=shared)
+            m = b.masses
+            K = np.diag(kt + np.append(kt[1:], 0.0)) - np.diag(kt[1:], 1) - np.diag(kt[1:], -1)
+            A = np.zeros((2 * n, 2 * n))
+            A[:n, n:] = np.eye(n)
+            A[n:, :n] = -K / m[:, None]
+            A[n:, n:] = -b.C / m[:, None]
+            D = np.eye(n) - np.eye(n, k=-1)
+            F = np.zeros((3 * n, 2 * n))
+            F[:n, :n] = np.eye(n)
+            F[n:2 * n, :n] = D
+            F[2 * n:, :] = A[n:, :]
+            watch = np.zeros((4 * n, 2 * n))
+            watch[:3 * n] = F
+            watch[3 * n:, n:] = D
+            B0 = np.zeros((2 * n, n + 2))
+            B0[n:, 0] = -1.0
+            B0[n:, 2:] = np.diag(1.0 / m)
+            B1 = np.zeros((2 * n, n + 2))
+            B1[n:, 1] = -1.0
+            la = np.abs(cfg.lam)
+            powers = np.column_stack([np.ones_like(la), la, la ** 2, la ** 3, la ** 4])
+            for got, want in ((cfg.K, K), (cfg.A, A), (cfg.peak_rows, F), (cfg.watch_rows, watch), (cfg.B0, B0),
+                              (cfg.B1, B1), (cfg.lam_powers, powers)):
+                assert got.shape == want.shape and got.tobytes() == want.tobytes()
+            assert cfg.rate == float(np.max(la)) and cfg.growth_rate == max(0.0, float(np.max(cfg.lam.real)))
+            alone = Configuration(b.masses, b.C, kt, elastic=False)       # its own constants
+            for name in ("lam", "V", "W", "WB0", "WB1", "peak_modal"):
+                assert getattr(cfg, name).tobytes() == getattr(alone, name).tobytes(), name
+            L = 0.01
+            assert cfg.segment_map(L).stacked.tobytes() == alone.segment_map(L).stacked.tobytes()
 
 
 def test_chord_event_test_never_clears_an_interval_with_an_event(monkeypatch):
