@@ -406,6 +406,8 @@ class Configuration:
     max_maps : bound of the cache of :class:`SegmentMap` by length
     elastic : the building's elastic configuration (its modal basis inverted exactly as in
         earlier versions, see :func:`_inverse`)
+    constants : the building's :class:`ConfigurationConstants` (made here if None; a building
+        with many yield patterns passes its own, made once: the same arrays, bit for bit)
     """
 
     def __init__(self, masses, damping_matrix, tangent, max_maps: int = 64, elastic: bool = True,
