@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cosim.master.coupling.adaptive import (CONTACT_FRACTION_RESOLVED, ONSET_RATIO, ONSET_SPEED_SHARE,
-                                            Adaptive, default_onset_fraction)
+                                            Adaptive, default_onset_fraction, takes_onset_steps)
 from cosim.master.guard import contact_levels
 from cosim.master.loader import load_scene
 from cosim.master.results import summarize
@@ -66,6 +66,30 @@ def test_default_onset_fraction():
     assert default_onset_fraction([Level(True), Level(True)], 0.5) == 0.25
     assert default_onset_fraction([Level(True), Level(False)], 1 / 64) == 1 / 64
     assert default_onset_fraction([], 1 / 64) == 1 / 64
+
+
+@pytest.mark.parametrize("overrides, takes", [([], True), (["pounding.resolve_impacts=false"], False),
+                                              (["pounding.model=crvk", "pounding.CR=0.001"], False),
+                                              (["pounding.model=crvk", "pounding.CR=0.65"], False),
+                                              (["pounding.model=hunt_crossley", "pounding.CR=0.001"], True)])
+def test_which_contacts_take_onset_steps(catalog, overrides, takes):
+    """Resolved contacts whose law cannot stick; crvk sticks at any CR (its force drops at
+    maximum penetration), the plain law's steps are all short."""
+    scene = load_scene("sanfernando", SANFERNANDO_SHORT + overrides, catalog)
+    with System(scene, catalog) as system:
+        assert [takes_onset_steps(lv) for lv in contact_levels(system)] == [takes] * len(scene.contacts)
+
+
+def test_a_sticking_contact_keeps_the_contact_step(catalog):
+    """crvk at CR 0.001 (the energy attack of tests/test_attacks.py): the same steps and outputs
+    as with the onset steps as long as the contact steps."""
+    overrides = SANFERNANDO_SHORT + ["pounding.model=crvk", "pounding.CR=0.001"]
+    scene = load_scene("sanfernando", overrides, catalog)
+    with System(scene, catalog) as system:
+        runs = [simulate(system, progress=False, **EVERYTHING, **opts)
+                for opts in ({}, dict(onset_fraction=CONTACT_FRACTION_RESOLVED))]
+    np.testing.assert_array_equal(runs[0].time, runs[1].time)
+    assert summarize(runs[0]).to_dict()["contacts"] == summarize(runs[1]).to_dict()["contacts"]
 
 
 def test_onset_fraction_is_checked(catalog):
