@@ -102,8 +102,8 @@ def test_onset_fraction_is_checked(catalog):
 
 def test_the_fastest_impacts_start_in_short_steps(catalog):
     """Every impact the fastest so far starts in a step no longer than ``onset_fraction * T`` and
-    its next step too; with the onset fraction equal to the contact fraction (main's steps
-    before session 28) the largest impact's first step in contact was twice that long."""
+    its next step too; with the onset fraction equal to the contact fraction (the steps
+    before the onset steps) the largest impact's first step in contact was twice that long."""
     _, rows = _onset_steps(catalog, SANFERNANDO_SHORT)
     assert len(rows) == 2
     for v, h_onset, h_next, longest in rows:

@@ -162,7 +162,7 @@ CONTACT_FRACTION_MAX = 2.0
 #: step comes from those steps (docs/contact_models.md, known limits): the host holds the step's
 #: mean force while the impact starts part-way through the step, and the contact FMU learns the
 #: structures' reaction to the impact one step late.  Measured (benchmarks/bench_scenes.py, every
-#: scene, one run, session 28): peak force kasai_maison 0.68 -> 0.15 %, sanfernando 0.43 ->
+#: scene, one run, 2026-11-24): peak force kasai_maison 0.68 -> 0.15 %, sanfernando 0.43 ->
 #: 0.18 %, kasai_maison_inelastic 0.26 -> 0.05 %, default_inelastic 0.38 -> 0.10 %, kobe 0.07
 #: -> 0.03 %, for 0.5-3 % more steps; the default scene 0.04 -> 0.21 % and parkfield 0.15 ->
 #: 0.24 %, where the prediction's lag no longer cancels the host's share.  The closing step
