@@ -347,8 +347,10 @@ class Adaptive(CouplingStrategy):
         self._far = 2.0 * max(1.0, self.risk_factor) * self.h_max
         self._nominal = self.h_max                         # the current step's nominal length (s, step())
         self._last_full = False                            # the last long step's proof held over its horizon
-        self._in_contact: list = []                        # each level in contact at the step start (_plan)
-        self._contact_steps = [0] * len(self.levels)       # accepted steps each level has been in contact
+        # each level in contact at the start of the step being planned (_plan; the last try's), and
+        # at the start of the last accepted step: a level in contact then is past its first step
+        self._no_contact = (False,) * len(self.levels)
+        self._in_contact = self._was_in_contact = self._no_contact
         self._v_fastest = 0.0                              # m/s, the fastest impact's approach speed so far
 
     def _knot_capacity(self) -> int:
@@ -427,9 +429,10 @@ class Adaptive(CouplingStrategy):
         could change neither.  A time scale costs a few contact-law evaluations: each is
         computed only where it can change the answer."""
         proven = self.t0 + self._tick * self.h_min + self.h_max   # a gap proven open until then: nothing to plan
-        in_contact = self._in_contact = [False] * len(self.levels)
         if min(self._proven, default=proven) >= proven:            # every gap (most steps): no loop
+            self._in_contact = self._no_contact
             return self.h_max, []
+        in_contact = self._in_contact = [False] * len(self.levels)
         y = self.system.y
         a_extra = y.item(self._i_pga) if self._i_pga is not None else 0.0
         h_target = self.h_max
@@ -445,7 +448,7 @@ class Adaptive(CouplingStrategy):
                 if v_imp > self._v_fastest:
                     self._v_fastest = v_imp
                 fraction = self.contact_fraction
-                if self._contact_steps[k] == 0 and v_imp >= ONSET_SPEED_SHARE * self._v_fastest:
+                if not self._was_in_contact[k] and v_imp >= ONSET_SPEED_SHARE * self._v_fastest:
                     fraction = onset                                # its first step in contact
                 h_target = min(h_target, lv.in_contact_scale(d, dd, v_imp, fraction))
                 continue
@@ -568,8 +571,7 @@ class Adaptive(CouplingStrategy):
             break
         if saved is not None:
             self._free(saved)
-        # each level's steps in contact, counted on accepted steps (the last try's plan)
-        self._contact_steps = [c + 1 if on else 0 for c, on in zip(self._contact_steps, self._in_contact)]
+        self._was_in_contact = self._in_contact            # the accepted try's plan (never changed after it)
         if self._dormancy is not None:
             self._dormancy.commit()
         self._tick = end_tick
