@@ -146,7 +146,7 @@ def cmd_accuracy(args) -> int:
 
     t0 = time.perf_counter()
     study, folder = study_and_write(args.scene, args.out, _overrides(args.overrides), fmu_dir=args.fmu_dir,
-                                    stop_time=args.stop_time, overwrite=args.overwrite)
+                                    stop_time=args.stop_time, overwrite=args.overwrite, repeats=args.repeats)
     print(markdown(study))
     print(f"written: {folder} (study wall time {time.perf_counter() - t0:.0f} s)")
     return EXIT_OK
@@ -351,6 +351,27 @@ def cmd_opensees(args) -> int:
 
 
 # -- the parser ------------------------------------------------------------------------------------
+def _timing_repeats(text: str) -> int:
+    """Timings per cheap run of the accuracy study (argparse type), 1 to MAX_TIMING_REPEATS."""
+    from .apps.accuracy import MAX_TIMING_REPEATS
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (allowed: 1 to {MAX_TIMING_REPEATS})") from None
+    if not 1 <= value <= MAX_TIMING_REPEATS:
+        raise argparse.ArgumentTypeError(f"{text} is outside the allowed range 1 to {MAX_TIMING_REPEATS}")
+    return value
+
+
+def _repeats_option(p: argparse.ArgumentParser) -> None:
+    from .apps.accuracy import REPEAT_BELOW_S, TIMING_REPEATS
+
+    p.add_argument("--repeats", type=_timing_repeats, default=TIMING_REPEATS, metavar="N",
+                   help=f"accuracy study: time every run under {REPEAT_BELOW_S:g} s (the package's and OpenSees' "
+                        "alike) N times and keep the fastest (default: %(default)s)")
+
+
 def _fraction(text: str) -> float:
     """A fraction 0 < value < 1 (argparse type): refused with the value and the range otherwise."""
     try:
@@ -431,6 +452,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--accuracy", action="store_true",
                    help="accuracy/time study (as the accuracy command): every coupling strategy over a range of "
                         "steps against the reference and OpenSees; writes accuracy.csv/.md/.png into --out")
+    _repeats_option(p)
     p.add_argument("--export-ssp", type=Path, metavar="FILE.ssp",
                    help="write the scene as an SSP 1.0 package (FMUs included) and exit without running")
 
@@ -445,6 +467,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     p.add_argument("--fmu-dir", type=Path, help="folder with the FMUs")
     p.add_argument("--out", type=Path, help="result folder: new or empty (default: out/<scene>_accuracy, numbered "
                                             "when taken)")
+    _repeats_option(p)
     _overwrite_option(p)
 
     from fmu_src.ground_records import FORMATS, UNITS

@@ -203,3 +203,64 @@ def test_drift_criteria_apply_to_yielding_scenes_only():
                      [[0.004, -0.00205]]).meets_criteria
     linear = dict(ref, yielding=[])
     assert math.isnan(score(Row("x", "step", 1.0), linear, 100.0, 1, 10.0, [1.0], [1.0]).err_peak_drift)
+
+
+# -- the timing rule: the package's runs and OpenSees' timed alike ------------------------------------
+class _Timed:
+    """Wraps a callable returning an object with a ``wall_time_s`` (the package's run cost or
+    OpenSees' result), replacing each timing by the next of ``walls`` (s)."""
+
+    def __init__(self, call, walls, cost=False):
+        self.call, self.walls, self.cost, self.calls = call, list(walls), cost, 0
+
+    def __call__(self, *args, **kwargs):
+        result = self.call(*args, **kwargs)
+        wall = self.walls[self.calls]
+        self.calls += 1
+        target = result.cost if self.cost else result
+        object.__setattr__(target, "wall_time_s", wall)
+        return result
+
+
+@pytest.mark.parametrize("walls, below, calls, kept", [
+    ((0.30, 0.20, 0.25), 1.0, 3, 0.20),     # cheap: timed three times, the fastest kept
+    ((1.50, 0.20, 0.25), 1.0, 1, 1.50),     # one slow timing: not repeated
+    ((0.30, 0.20, 0.25), math.inf, 3, 0.20),
+])
+def test_cheap_runs_are_timed_repeatedly_and_the_fastest_kept(fmu_dir, monkeypatch, walls, below, calls, kept):
+    import cosim.apps.accuracy as accuracy
+    from cosim.apps.accuracy import DEFAULT_SETTINGS, run_cosim
+
+    timed = _Timed(accuracy.simulate, walls, cost=True)
+    monkeypatch.setattr(accuracy, "simulate", timed)
+    ref = {"impacts": 3, "peak_force_N": 1.0, "dissipated_energy_J": 1.0, "peak_displacements_m": [1.0, 1.0], "impact_times_s": []}
+    with Catalog(fmu_dir) as catalog:
+        row = run_cosim("default", DEFAULT_SETTINGS, 0.0, catalog, ref, stop_time=0.5, repeats=3,
+                        repeat_below_s=below)
+    assert (timed.calls, row.wall_time_s) == (calls, kept)
+
+
+def test_opensees_runs_follow_the_same_timing_rule(monkeypatch):
+    import cosim.apps.accuracy as accuracy
+    from cosim.master.loader import load_scene
+    from cosim.peers.opensees import opensees_available
+
+    if not opensees_available():
+        pytest.skip("openseespy is not importable")
+    timed = _Timed(accuracy.opensees_for_scene, (0.30, 0.20, 0.25, 2.0, 0.1))
+    monkeypatch.setattr(accuracy, "opensees_for_scene", timed)
+    scene = load_scene("default", ["stop_time=0.5"])
+    ref = {"impacts": 0, "peak_force_N": 0.0, "dissipated_energy_J": 0.0, "peak_displacements_m": [1.0, 1.0], "impact_times_s": []}
+    row = accuracy.run_peer(scene, 4e-3, ref, repeats=3, repeat_below_s=1.0)
+    assert (timed.calls, row.wall_time_s) == (3, 0.20)
+    row = accuracy.run_peer(scene, 4e-3, ref, repeats=3, repeat_below_s=1.0)
+    assert (timed.calls, row.wall_time_s) == (4, 2.0)
+
+
+def test_study_timings_per_run_are_bounded(tmp_path):
+    from cosim.apps.accuracy import MAX_TIMING_REPEATS, study_and_write
+
+    for bad in (0, MAX_TIMING_REPEATS + 1, 2.5):
+        with pytest.raises(ValueError, match=f"repeats = {bad!r}: .* 1 to {MAX_TIMING_REPEATS}"):
+            study_and_write("default", tmp_path / "out", repeats=bad, log=None)
+    assert not (tmp_path / "out").exists()
