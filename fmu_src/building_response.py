@@ -432,6 +432,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
+        self._all_functions = list(range(3 * n))        # _peaks' candidates when tier 1 flagged none
         self._inv_m = 1.0 / self.masses
         self._plans: dict[int, tuple] = {}
         # the bilinear law's constants, as hysteresis.py's functions compute them (bit for bit)
@@ -1565,8 +1566,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # being monotonic, a function this bound keeps under its limit fails the test too.
         # (a dozen numpy calls: worth it from about 16 candidates, measured; fewer are tested
         # one by one at once)
-        keep = np.ones(3 * n, dtype=bool) if flags is None else flags
+        keep = flags
         if 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM):
+            if keep is None:
+                keep = np.ones(3 * n, dtype=bool)
             g0v = np.abs(G[:, 0] + self._watch_offset(accel_offset))
             g1v = np.abs(g1)
             s0v, s1v = np.abs(G[:, 2]), np.abs(G[:, 3])
@@ -1582,10 +1585,16 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 s0v + s1v + curvatures) - B[:, 1] * w4 > 0.0
             monotonic &= G[:, 2] * G[:, 3] > 0.0
             keep = keep & ~(reach <= limits) & ~monotonic
-        candidates = keep.nonzero()[0].tolist()
-        if not candidates:            # every function cleared: only the end values count
-            state.peaks = new
-            return
+        if keep is None:
+            # every function a candidate (no prefilter for a few storeys): all rows, in order
+            candidates = self._all_functions
+            rows, bounds = G.tolist(), B.tolist()
+        else:
+            candidates = keep.nonzero()[0].tolist()
+            if not candidates:            # every function cleared: only the end values count
+                state.peaks = new
+                return
+            rows, bounds = G[candidates].tolist(), B[candidates].tolist()
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
         # (only the candidates' rows: most segments leave a few of the 3n functions)
@@ -1593,8 +1602,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         ends, limit_list = g1.tolist(), limits.tolist()
         offsets = accel_offset.tolist()
         deferred = []
-        for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, G[candidates].tolist(),
-                                                               B[candidates].tolist()):
+        for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, rows, bounds):
             end, limit = ends[j], limit_list[j]
             if j >= 2 * n:
                 g0 = g0 + offsets[j - 2 * n]

@@ -471,6 +471,9 @@ class Configuration:
         powers[:, 3] = self.lam3
         powers[:, 4] = self.lam4
         self.lam_powers = powers
+        # Scan's: where its vector's blocks end (6 blocks of the 3n tracked functions, then Re W z'(0))
+        # and the columns |lam|^3..4 and |lam|^2..3 (views)
+        self.scan_parts = (18 * n, 20 * n, powers[:, 3:5], powers[:, 2:4])
         self.rate = max(self.lam_abs.tolist()) if n else 0.0
         self.growth_rate = max(0.0, max(lam.real.tolist()))   # > 0 only by round-off
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w (the building's, ConfigurationConstants).
@@ -776,22 +779,21 @@ class Scan:
     __slots__ = ("G", "B")
 
     def __init__(self, cfg: "Configuration", vector: np.ndarray, ag_slope: float, length: float):
-        m = cfg.peak_rows.shape[0]
-        two_n = 2 * cfg.n
-        self.G = vector[:6 * m].reshape(6, m).T
-        re = vector[6 * m:6 * m + two_n]
-        im = vector[6 * m + two_n:]
+        # (the configuration's sizes and column views, made once: a Scan is made per segment)
+        m6, re_end, lam34, lam23 = cfg.scan_parts
+        self.G = vector[:m6].reshape(6, -1).T
+        re = vector[m6:re_end]
+        im = vector[re_end:]
         amp = np.sqrt(re * re + im * im)
-        lam = cfg.lam_powers          # columns |lam|^0 .. |lam|^4
         if ag_slope != 0.0:
             ramp = abs(ag_slope) * cfg.ramp_abs
             amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
             # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
-            powers = lam[:, 3:5] * amp[:, None] + lam[:, 2:4] * ramp[:, None]
+            powers = lam34 * amp[:, None] + lam23 * ramp[:, None]
         else:
             if cfg.growth_rate:
                 amp = amp * math.exp(cfg.growth_rate * length)
-            powers = lam[:, 3:5] * amp[:, None]
+            powers = lam34 * amp[:, None]
         self.B = cfg.peak_modal_abs @ powers
 
 
