@@ -448,6 +448,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._soft_list, self._qy_list = self._elastic_k.tolist(), self._yield_q.tolist()
         limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
         self._second_order_limits = (limit, -limit)
+        self._second_order_limit_lists = (limit.tolist(), (-limit).tolist())
+        self._dy_list = self.dy.tolist()
         # a linear building's one-interval step matrices by canonical length, and by every
         # exact length asked (ramp_step)
         self._ramps: dict[float, RampStep] = {}
@@ -1161,12 +1163,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                         margin = self.dy - np.abs(e0) - reach
                     quiet = bool(margin.min() > 0.0)
                     if not quiet:
-                        up_flags = elastic & (e0 + reach >= self.dy)
-                        down_flags = elastic & (e0 - reach <= -self.dy)
+                        # the storeys left, as lists of Python bools (the same IEEE operations as
+                        # on the arrays: the same decisions), which _second_order_quiet narrows
+                        # and _first_event reads, without a numpy call per test on a few storeys
+                        el, e0_, reach_, dy = elastic.tolist(), e0.tolist(), reach.tolist(), self._dy_list
+                        up_flags = [el[i] and e0_[i] + reach_[i] >= dy[i] for i in range(n)]
+                        down_flags = [el[i] and e0_[i] - reach_[i] <= -dy[i] for i in range(n)]
                         if yielding:
-                            unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                            modes, rate_, b_ = state.mode.tolist(), watched[3 * n:].tolist(), bound[3 * n:].tolist()
+                            unload_flags = [not el[i] and modes[i] * rate_[i] - b_[i] <= 0.0 for i in range(n)]
                         else:      # no yielding storey to unload
-                            unload_flags = np.zeros(n, dtype=bool)
+                            unload_flags = [False] * n
                         quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
                                                          ag1, rem, up_flags, down_flags, unload_flags)
                 else:
@@ -1243,23 +1250,35 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """
         n = self.n
         M, Ra, Rb = cfg.drift_curvature_rows()
-        bound = M @ np.abs(scan_vector[-4 * n:])
+        bound = (M @ np.abs(scan_vector[-4 * n:])).tolist()
+        # on Python floats, storey by storey: the same IEEE operations as numpy's elementwise
+        # ones (so the same decisions) without a numpy call per operation on a few storeys; the
+        # flags are lists of bools, narrowed in place
         if ag1 != 0.0:
-            bound += abs(ag1) * (length * Ra + Rb)
+            slope = abs(ag1)
+            bound = [b + slope * (length * ra + rb) for b, ra, rb in zip(bound, *cfg.drift_curvature_lists())]
         half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
-        rem2 = bound[:n] * half
-        e1 = e0 + rate0 * length
-        limit, low = self._second_order_limits
-        up_flags &= np.maximum(e0, e1) + rem2 >= limit
-        down_flags &= np.minimum(e0, e1) - rem2 <= low
-        if not unload_flags.any():       # no yielding storey left to test (all elastic: most segments)
-            return not (up_flags.any() or down_flags.any())
+        e0, rate0 = e0.tolist(), rate0.tolist()
+        limit, low = self._second_order_limit_lists
+        for i in range(n):
+            if up_flags[i] or down_flags[i]:
+                rem2 = bound[i] * half
+                a = e0[i]
+                b = a + rate0[i] * length
+                hi, lo = (a, b) if a >= b else (b, a)
+                up_flags[i] = up_flags[i] and hi + rem2 >= limit[i]
+                down_flags[i] = down_flags[i] and lo - rem2 <= low[i]
+        if not any(unload_flags):       # no yielding storey left to test (all elastic: most segments)
+            return not (any(up_flags) or any(down_flags))
         m = 3 * n                                # rows of each block of the scan vector; block 4: g''(0)
-        mode = state.mode
-        g0 = mode * rate0
-        g1 = g0 + mode * scan_vector[4 * m + n:4 * m + 2 * n] * length - bound[n:] * half
-        unload_flags &= np.minimum(g0, g1) <= 1e-12 * np.abs(g0)
-        return not (up_flags.any() or down_flags.any() or unload_flags.any())
+        mode = state.mode.tolist()
+        curvature = scan_vector[4 * m + n:4 * m + 2 * n].tolist()
+        for i in range(n):
+            if unload_flags[i]:
+                g0 = mode[i] * rate0[i]
+                g1 = g0 + mode[i] * curvature[i] * length - bound[n + i] * half
+                unload_flags[i] = (g0 if g0 <= g1 else g1) <= 1e-12 * abs(g0)
+        return not (any(up_flags) or any(down_flags) or any(unload_flags))
 
     def _storey_shear_at(self, state, d):
         """``V`` of drifts ``d`` (any shape ending in n) in the state's yield pattern: a yielding
@@ -1469,20 +1488,22 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """
         n = self.n
         mode = state.mode
+        modes = mode.tolist()
         if up_flags is None:
-            elastic = mode == 0
-            up_flags = down_flags = elastic
-            unload_flags = ~elastic
+            ups = downs = [m == 0 for m in modes]
+            unloads = [m != 0 for m in modes]
+            storeys = list(range(n))
+        else:       # lists of bools (_interval, _second_order_quiet)
+            ups, downs, unloads = up_flags, down_flags, unload_flags
+            storeys = [i for i in range(n) if ups[i] or downs[i] or unloads[i]]
         w4 = rem ** 4 / 384.0
-        storeys = np.flatnonzero(up_flags | down_flags | unload_flags).tolist()
         if not storeys:
             return segment, None
         # The tests on Python floats: the same IEEE double operations as on numpy scalars (so
         # the same bits and decisions), at a fraction of their cost per operation.
         G = scan.G[n:2 * n].tolist()                    # the drift rows
         B = scan.B[n:2 * n].tolist()
-        modes, slips, dys = mode.tolist(), state.slip.tolist(), self.dy.tolist()
-        ups, downs, unloads = up_flags.tolist(), down_flags.tolist(), unload_flags.tolist()
+        slips, dys = state.slip.tolist(), self._dy_list
         candidates = []
         # (each Hermite range only where its cheaper bound, _hermite_spread, leaves the test
         # open: where that bound decides, the range decides the same, rounding being monotonic)

@@ -713,6 +713,14 @@ class Configuration:
             rows = self._drift_curvature = (M, Ra, Rb)
         return rows
 
+    def drift_curvature_lists(self) -> tuple[list, list]:
+        """``(Ra, Rb)`` of :meth:`drift_curvature_rows` as lists of Python floats (made once)."""
+        lists = getattr(self, "_drift_curvature_lists", None)
+        if lists is None:
+            _, Ra, Rb = self.drift_curvature_rows()
+            lists = self._drift_curvature_lists = (Ra.tolist(), Rb.tolist())
+        return lists
+
     def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
         """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
         A, F = self.A, self.peak_rows
