@@ -1305,18 +1305,20 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if memo is None or memo[0] is not state.peak_shear or memo[1] is not state.yielded:
             # the largest P for which that bound stays at the peak, per storey: changes only when
             # a peak shear grows or a storey first yields (the drift peaks change far more often)
-            V = state.peak_shear * (1.0 + 1e-12)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                level = np.where(self._hard_k > 0.0, (V - self._yield_q) / self._hard_k,
-                                 np.where(V >= self._yield_q, np.inf, -np.inf))
-            level[~state.yielded] = np.inf     # not tracked (peak_storey_shear: k times the peak drift)
+            # (on Python floats, storey by storey: the same operations as elementwise numpy, without
+            # an errstate context and a dozen calls; a storey not yielded is not tracked,
+            # peak_storey_shear: k times the peak drift)
+            V = (state.peak_shear * (1.0 + 1e-12)).tolist()
+            level = np.array([((v - q) / h if h > 0.0 else (math.inf if v >= q else -math.inf)) if y else math.inf
+                              for v, q, h, y in zip(V, self._qy_list, self._hard_list, state.yielded.tolist())])
             memo = self._cover_memo = (state.peak_shear, state.yielded, level)
             self._covered_memo = None
         known = self._covered_memo
         if known is not None and known[0] is state.peaks:
             return known[1]
-        mask = state.peak_drift <= memo[2]
-        result = (bool(mask.all()), mask)
+        n = self.n
+        mask = state.peaks[n:2 * n] <= memo[2]       # the drift peaks
+        result = (all(mask.tolist()), mask)
         self._covered_memo = (state.peaks, result)
         return result
 

@@ -53,6 +53,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import eig, get_lapack_funcs, lu_factor
+
+try:        # what np.einsum calls without `optimize` (its Python wrapper costs as much as the sum)
+    from numpy._core.multiarray import c_einsum as _c_einsum
+except ImportError:         # another numpy layout: the public function, the same arithmetic
+    _c_einsum = np.einsum
 try:        # scipy's own workspace query for eig's geev (private: _eigen falls back to eig without it)
     from scipy.linalg.lapack import _compute_lwork
 except ImportError:       # pragma: no cover - a scipy that moved it
@@ -558,7 +563,8 @@ class Configuration:
 
     def quadrature(self, v: np.ndarray, nodes: np.ndarray, weights: np.ndarray, w: np.ndarray):
         """:meth:`energies` from the floor velocities ``v`` (n, K) at the quadrature nodes."""
-        damping = float(np.einsum("k,ik,ik->", weights, v, self.C @ v))
+        # (np.einsum without optimize is c_einsum itself: called directly, the same sums)
+        damping = float(_c_einsum("k,ik,ik->", weights, v, self.C @ v))
         ag = w[0] + w[1] * nodes
         work = -float((weights * ag) @ (self.masses @ v))
         return damping, work
