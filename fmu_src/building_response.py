@@ -1146,39 +1146,45 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             peak_flags = unload_flags = up_flags = down_flags = None
             quiet = False      # True: tier 1 proved that no storey changes state in this segment
             if change is not None:
-                bound = change @ np.abs(scan_vector[-4 * n:])
+                # on Python floats and bools, function by function: the same IEEE operations as
+                # numpy's elementwise ones (so the same decisions), without a numpy call per
+                # operation on the few storeys' 4n watched functions
+                bound = (change @ np.abs(scan_vector[-4 * n:])).tolist()
                 if ag1 != 0.0:
-                    bound += abs(ag1) * smap.ramp_change
-                watched[2 * n:3 * n] += p * self._inv_m
+                    slope = abs(ag1)
+                    bound = [b + slope * r for b, r in zip(bound, smap.ramp_change.tolist())]
+                watched = watched.tolist()
+                for i, offset in enumerate((p * self._inv_m).tolist()):
+                    watched[2 * n + i] += offset          # the accelerations' constant part p / m
                 # strict (no tolerance): a segment cleared here records no end value
-                peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
+                peak_flags = [abs(g) + b > peak for g, b, peak in zip(watched[:3 * n], bound, state.peaks.tolist())]
                 if inelastic:
                     # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
-                    e0 = watched[n:2 * n] - state.slip
+                    e0 = [d - s for d, s in zip(watched[n:2 * n], state.slip.tolist())]
                     reach = bound[n:2 * n]
+                    dy = self._dy_list
+                    el = elastic.tolist()
                     if yielding:
-                        margin = np.where(elastic, self.dy - np.abs(e0) - reach,
-                                          state.mode * watched[3 * n:] - bound[3 * n:])
-                    else:      # every storey elastic: np.where's first branch, fewer operations
-                        margin = self.dy - np.abs(e0) - reach
-                    quiet = bool(margin.min() > 0.0)
+                        modes, rate = state.mode.tolist(), watched[3 * n:]
+                        quiet = all((dy[i] - abs(e0[i]) - reach[i] if el[i] else modes[i] * rate[i] - bound[3 * n + i])
+                                    > 0.0 for i in range(n))
+                    else:      # every storey elastic
+                        quiet = all(dy[i] - abs(e0[i]) - reach[i] > 0.0 for i in range(n))
                     if not quiet:
-                        # the storeys left, as lists of Python bools (the same IEEE operations as
-                        # on the arrays: the same decisions), which _second_order_quiet narrows
-                        # and _first_event reads, without a numpy call per test on a few storeys
-                        el, e0_, reach_, dy = elastic.tolist(), e0.tolist(), reach.tolist(), self._dy_list
-                        up_flags = [el[i] and e0_[i] + reach_[i] >= dy[i] for i in range(n)]
-                        down_flags = [el[i] and e0_[i] - reach_[i] <= -dy[i] for i in range(n)]
+                        # the storeys left, as lists of bools, which _second_order_quiet narrows
+                        # and _first_event reads
+                        up_flags = [el[i] and e0[i] + reach[i] >= dy[i] for i in range(n)]
+                        down_flags = [el[i] and e0[i] - reach[i] <= -dy[i] for i in range(n)]
                         if yielding:
-                            modes, rate_, b_ = state.mode.tolist(), watched[3 * n:].tolist(), bound[3 * n:].tolist()
-                            unload_flags = [not el[i] and modes[i] * rate_[i] - b_[i] <= 0.0 for i in range(n)]
+                            unload_flags = [not el[i] and modes[i] * rate[i] - bound[3 * n + i] <= 0.0
+                                            for i in range(n)]
                         else:      # no yielding storey to unload
                             unload_flags = [False] * n
                         quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
                                                          ag1, rem, up_flags, down_flags, unload_flags)
                 else:
                     quiet = True
-                if quiet and not peak_flags.any():
+                if quiet and not any(peak_flags):
                     cost.cleared += 1
                     # tier 1 kept every |drift| under its peak: a covered storey's shear cannot pass its own
                     if inelastic:
@@ -1208,8 +1214,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # (a storey whose |drift| tier 1 kept under its peak is covered as above)
                 if inelastic:
                     covered, mask = self._shear_covered(state)
-                    storeys = None if peak_flags is None else peak_flags[n:2 * n] | ~mask
-                    if storeys is None or storeys.any():
+                    if peak_flags is None:
+                        storeys = None
+                    else:
+                        storeys = [f or not m for f, m in zip(peak_flags[n:2 * n], mask.tolist())]
+                    if storeys is None or any(storeys):
                         self._track_shear(state, cfg, y, z1, stop, scan=scan, segment=segment,
                                           drift_reach=None if change is None else bound[n:2 * n], storeys=storeys)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
@@ -1258,7 +1267,6 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             slope = abs(ag1)
             bound = [b + slope * (length * ra + rb) for b, ra, rb in zip(bound, *cfg.drift_curvature_lists())]
         half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
-        e0, rate0 = e0.tolist(), rate0.tolist()
         limit, low = self._second_order_limit_lists
         for i in range(n):
             if up_flags[i] or down_flags[i]:
@@ -1338,15 +1346,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         # on Python floats: the storeys asked are few (those whose drift tier 1 did not clear)
         # (a storey that has not yielded is not tracked: peak_storey_shear)
-        asked = state.yielded if storeys is None else storeys & state.yielded
-        which = asked.nonzero()[0].tolist()
+        if storeys is None:
+            which = state.yielded.nonzero()[0].tolist()
+        elif type(storeys) is list:     # (_interval's flags)
+            which = [i for i, (a, b) in enumerate(zip(storeys, state.yielded.tolist())) if a and b]
+        else:
+            which = (storeys & state.yielded).nonzero()[0].tolist()
         if not which:
             return
         u1, u0 = z1[:n].tolist(), y[:n].tolist()
         mode, slip = state.mode.tolist(), state.slip.tolist()
         k, hard, soft, qy = self._k_list, self._hard_list, self._soft_list, self._qy_list
         peak = state.peak_shear.tolist()
-        reach_rows = None if drift_reach is None else drift_reach.tolist()
+        reach_rows = drift_reach if drift_reach is None or type(drift_reach) is list else drift_reach.tolist()
         if scan is not None:
             G, B = scan.G[n:2 * n].tolist(), scan.B[n:2 * n, 0].tolist()      # the drift rows
         w4 = length ** 4 / 384.0
@@ -1613,7 +1625,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             candidates = self._all_functions
             rows, bounds = G.tolist(), B.tolist()
         else:
-            candidates = keep.nonzero()[0].tolist()
+            # (_interval's flags are a list of bools)
+            candidates = [j for j, f in enumerate(keep) if f] if type(keep) is list else keep.nonzero()[0].tolist()
             if not candidates:            # every function cleared: only the end values count
                 state.peaks = new
                 return
