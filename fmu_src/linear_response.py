@@ -974,8 +974,7 @@ class TaylorSegment(ModalSegment):
         dq0 = self._dq0 = cfg.lam * self.q0 + self.beta0
         # the start needs no evaluation: what modal_at(0) gives, bit for bit
         self._memo[0.0] = (self.q0, dq0)
-        self._amp0 = np.abs(dq0)
-        self._ramp = np.abs(self.beta1)
+        self._amp0 = self._ramp = None      # |q'(0)|, |beta1|: made at the first bound (_bound_parts)
         self._taylor = None                 # the columns, made at their first use
         self._bounds = {}                   # see _bound_parts
 
@@ -1074,6 +1073,9 @@ class TaylorSegment(ModalSegment):
         key = id(c_modal_abs)
         hit = self._bounds.get(key)
         if hit is None or hit[0] is not c_modal_abs:
+            if self._amp0 is None:
+                self._amp0 = np.abs(self._dq0)
+                self._ramp = np.abs(self.beta1)
             powers = self.cfg.lam_powers
             weights = c_modal_abs
             amp0 = weights @ (powers * self._amp0[:, None])
