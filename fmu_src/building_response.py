@@ -371,7 +371,7 @@ class BuildingIntegrator:
 
     def response(self, state: BuildingState, force):
         """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes)."""
-        d = _drift(state.u)
+        d = self._drift_of(state.u)
         V, strain = self._shear_and_strain(state, d)
         a = (force - self.C @ state.v - _floor_forces(V)) / self.masses
         return d, V, a, strain
@@ -379,6 +379,10 @@ class BuildingIntegrator:
     def _shear_and_strain(self, state, d):
         # the strain energy as ShearBuilding.strain_energy writes it (the linear model, bit for bit)
         return self.k * d, 0.5 * float(self.k @ (d * d))
+
+    def _drift_of(self, u: np.ndarray) -> np.ndarray:
+        """The storey drifts of floor displacements ``u`` (an array nobody writes to)."""
+        return _drift(u)
 
     def initial_state(self, u0, v0, force=None) -> BuildingState:
         """The elastic initial state at ``(u0, v0)``; peaks start from its values."""
@@ -440,6 +444,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._hard_k = self.alpha * self.k                  # the hardening spring
         self._law_memo = None
         self._shear_memo = None
+        self._drift_memo = None     # (u, its drifts) of the last displacement array asked (_drift_of)
         self._cover_memo = None
         self._covered_memo = None
         self._yield_q = (1.0 - self.alpha) * self.fy       # the plastic element's strength (N)
@@ -458,6 +463,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._legacy_parts = None              # legacy_rows' constant rows, made at its first call
 
     # -- bilinear storey state -----------------------------------------------------------------
+    def _drift_of(self, u: np.ndarray) -> np.ndarray:
+        """:func:`_drift` of ``u``, remembered for the array object last asked (a state's arrays
+        are replaced, never changed in place, and nobody writes to the drifts returned): a
+        segment's end drifts (:meth:`_yield_along`) are the next segment's start drifts and the
+        published ones."""
+        memo = self._drift_memo
+        if memo is not None and memo[0] is u:
+            return memo[1]
+        d = _drift(u)
+        self._drift_memo = (u, d)
+        return d
+
     def _law_facts(self, mode: np.ndarray):
         """``(mode, yielding mask, any yielding, q of the yielding storeys, (1 - alpha) Fy mode,
         mode dy)`` of a mode array, remembered for the array object last seen (a state's mode is
@@ -1459,8 +1476,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         the segment (unloading is an event), its slip follows the drift."""
         _, yielding, any_yielding, _, work, offset = self._law_facts(state.mode)
         if any_yielding:
-            d0 = _drift(state.u)
-            d1 = _drift(u1)
+            d0 = self._drift_of(state.u)
+            d1 = self._drift_of(u1)
             state.E_hysteretic += float(work @ (d1 - d0))      # elastic storeys: mode 0
             state.slip = np.where(yielding, d1 - offset, state.slip)
 
