@@ -436,6 +436,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
+        self._peak_atol_list = self._peak_atol.tolist()
         self._all_functions = list(range(3 * n))        # _peaks' candidates when tier 1 flagged none
         self._inv_m = 1.0 / self.masses
         self._plans: dict[int, tuple] = {}
@@ -1604,12 +1605,23 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """
         n = self.n
         G, B = scan.G, scan.B
-        g1 = G[:, 1].copy()
-        accel_offset = p * self._inv_m
-        g1[2 * n:] += accel_offset
-        new = np.maximum(state.peaks, np.abs(g1))
         w4 = length ** 4 / 384.0
-        limits = new + self._peak_atol
+        accel_offset = p * self._inv_m
+        prefilter = 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM)
+        if prefilter:
+            g1 = G[:, 1].copy()
+            g1[2 * n:] += accel_offset
+            new = np.maximum(state.peaks, np.abs(g1))
+            limits = new + self._peak_atol
+        else:
+            # the few functions of a low building on Python floats: the same IEEE operations as
+            # the arrays' (np.maximum's NaN included), without a numpy call for each
+            g1 = G[:, 1].tolist()
+            for i, offset in enumerate(accel_offset.tolist()):
+                g1[2 * n + i] += offset
+            raised = [b if b > a or b != b else a for a, b in zip(state.peaks.tolist(), map(abs, g1))]
+            new = np.array(raised)
+            limits = [a + b for a, b in zip(raised, self._peak_atol_list)]
         # Drop at once the functions that the Hermite test below provably drops: on [0, 1] a
         # cubic Hermite through end values g0, g1 and slopes d0, d1 stays within max(|g0|, |g1|)
         # + 4/27 (|d0| + |d1|) (its basis: h00 + h01 = 1, both in [0, 1]; |h10|, |h11| <= 4/27),
@@ -1619,7 +1631,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # (a dozen numpy calls: worth it from about 16 candidates, measured; fewer are tested
         # one by one at once)
         keep = flags
-        if 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM):
+        if prefilter:
             if keep is None:
                 keep = np.ones(3 * n, dtype=bool)
             g0v = np.abs(G[:, 0] + self._watch_offset(accel_offset))
@@ -1652,7 +1664,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # (so the same bits), at a fraction of their cost per operation.
         # (only the candidates' rows: most segments leave a few of the 3n functions)
         # (rows gathered apart: np.column_stack cost more than the tests of a few candidates)
-        ends, limit_list = g1.tolist(), limits.tolist()
+        if prefilter:
+            ends, limit_list = g1.tolist(), limits.tolist()
+        else:
+            ends, limit_list = g1, limits
         offsets = accel_offset.tolist()
         deferred = []
         for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, rows, bounds):
