@@ -920,7 +920,7 @@ class TaylorScan:
     def state_and_scan(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """``(z(s), the scan vector of [0, s])``: what :meth:`Configuration.scan_vector` gives."""
         K = self.degree
-        powers = np.cumprod(np.full(K + 1, s))
+        powers = np.full(K + 1, s).cumprod()         # (the method: np.cumprod's wrapper costs as much)
         powers[1:] = powers[:-1]
         powers[0] = 1.0
         # the value, slope and curvature of every power at 0 and at s, as columns
@@ -940,7 +940,7 @@ class TaylorScan:
         nodes, weights = cfg.chunk_nodes(length)
         powers = np.ones((self.degree + 1, nodes.size))
         powers[1:] = nodes
-        np.cumprod(powers, axis=0, out=powers)
+        powers.cumprod(axis=0, out=powers)
         return cfg.quadrature(self.Z[cfg.n:] @ powers, nodes, weights, w)
 
 
@@ -1034,7 +1034,7 @@ class TaylorSegment(ModalSegment):
         columns = self.taylor()
         if columns is None:
             return self.cfg.state_at(self.q0, self.beta0, self.beta1, s)
-        powers = np.cumprod(np.full(columns.shape[1], s))
+        powers = np.full(columns.shape[1], s).cumprod()
         powers[1:] = powers[:-1]
         powers[0] = 1.0
         return (self.cfg.V @ (columns @ powers)).real
@@ -1048,7 +1048,7 @@ class TaylorSegment(ModalSegment):
         nodes, weights = cfg.chunk_nodes(length)
         powers = np.ones((columns.shape[1], nodes.size))
         powers[1:] = nodes
-        np.cumprod(powers, axis=0, out=powers)
+        powers.cumprod(axis=0, out=powers)
         v = (cfg.V[cfg.n:] @ (columns @ powers)).real
         return cfg.quadrature(v, nodes, weights, w)
 
@@ -1111,7 +1111,7 @@ def _taylor_powers(lam, degree: int) -> tuple:
     k = np.arange(2, degree + 1, dtype=float)
     P = np.ones((lam.size, degree), dtype=complex)
     P[:, 1:] = lam[:, None] / np.arange(1, degree, dtype=float)
-    np.cumprod(P, axis=1, out=P)
+    P.cumprod(axis=1, out=P)
     return P[:, 1:], P[:, :-1] / (k - 1.0), k, degree
 
 
