@@ -1576,20 +1576,23 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         for i, kind in candidates:
             # the modal row of the event function, kept by the configuration (the same product)
             key = (i, kind, modes[i])
-            c_modal = event_rows.get(key)
-            if c_modal is None:
+            rows = event_rows.get(key)
+            if rows is None:
                 row = np.zeros(2 * n)
                 if kind == 0:
                     row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
                 else:
                     row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
-                c_modal = event_rows[key] = row @ cfg.V
+                c_modal = row @ cfg.V
+                rows = event_rows[key] = (c_modal, np.abs(c_modal))
+            c_modal, c_abs = rows
             offset = 0.0 if kind == 0 else self.dy[i] + kind * state.slip[i]
             horizon = rem if best is None else best[0]
             if horizon <= 0.0:
                 return segment, best
             cost.root_searches += 1
-            t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
+            t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET,
+                           c_modal_abs=c_abs)
             if t is not None and (best is None or t < best[0]):
                 best = (t, int(i), kind)
         return segment, best

@@ -507,8 +507,9 @@ class Configuration:
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
         self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
         # modal rows of the event functions searched in this configuration, by (storey, kind,
-        # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event): at most 3n
-        self.event_rows: dict[tuple, np.ndarray] = {}
+        # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event), with their
+        # magnitudes: (row, |row|), at most 3n
+        self.event_rows: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
     # -- evaluation -------------------------------------------------------------------------
     def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
@@ -848,6 +849,14 @@ class ModalSegment:
             out.append(float((c_modal @ term).real))
         return out
 
+    def start_values(self, c_modal: np.ndarray, c_modal_abs: np.ndarray) -> tuple[list[float], list[float]]:
+        """``(derivatives(c_modal, 0, 3), magnitudes(c_modal_abs, 0, 3))`` (:func:`first_root`'s
+        start) with ``q''(0)`` formed once: the same operations, so the same values."""
+        q, dq = self.modal_derivatives(0.0)
+        term = self.cfg.lam * dq + self.beta1
+        return ([float((c_modal @ q).real), float((c_modal @ dq).real), float((c_modal @ term).real)],
+                [float(c_modal_abs @ np.abs(q)), float(c_modal_abs @ np.abs(dq)), float(c_modal_abs @ np.abs(term))])
+
     def evaluator(self, c_modal: np.ndarray, count: int):
         """``s -> derivatives(c_modal, s, count)``: what the searches call at every point."""
         return lambda s: self.derivatives(c_modal, s, count)
@@ -1147,7 +1156,8 @@ def _cubic_lower_bound_positive(g0: float, g1: float, g2: float, bound3: float, 
 
 
 def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset: float,
-               length: float, xtol: float, min_width: float, budget: int = 200) -> float | None:
+               length: float, xtol: float, min_width: float, budget: int = 200,
+               c_modal_abs: np.ndarray | None = None) -> float | None:
     """First s in [0, length] where ``g = c' z^(order) + offset`` reaches 0 from above, or None.
 
     ``g`` should be >= 0 at s = 0; it may start at 0 (a storey that has just switched sits at
@@ -1159,11 +1169,14 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
     sign change is refined by bracketed Newton to ``xtol``.  The time returned is on or past
     the crossing (``g <= 0`` there): the state handed to the next law lies on the new side, or
     the switch would be undone at once.  A touch without crossing narrower than ``min_width``
-    is not a root (a graze).
+    is not a root (a graze).  ``c_modal_abs``: ``|c_modal|`` if the caller keeps it.
     """
-    c_abs = np.abs(c_modal)
-    start = segment.derivatives(c_modal, 0.0, order + 3)[order:]
-    scale = segment.magnitudes(c_abs, 0.0, order + 3)[order:]
+    c_abs = np.abs(c_modal) if c_modal_abs is None else c_modal_abs
+    if order == 0:
+        start, scale = segment.start_values(c_modal, c_abs)
+    else:
+        start = segment.derivatives(c_modal, 0.0, order + 3)[order:]
+        scale = segment.magnitudes(c_abs, 0.0, order + 3)[order:]
     tol = [ROUNDOFF * m for m in scale]
     tol[0] += ROUNDOFF * abs(offset)
     g0 = start[0] + offset
