@@ -371,7 +371,7 @@ class BuildingIntegrator:
 
     def response(self, state: BuildingState, force):
         """``(drift, V, a, E_strain)`` of a state, each computed once (what an FMU publishes)."""
-        d = _drift(state.u)
+        d = self._drift_of(state.u)
         V, strain = self._shear_and_strain(state, d)
         a = (force - self.C @ state.v - _floor_forces(V)) / self.masses
         return d, V, a, strain
@@ -379,6 +379,10 @@ class BuildingIntegrator:
     def _shear_and_strain(self, state, d):
         # the strain energy as ShearBuilding.strain_energy writes it (the linear model, bit for bit)
         return self.k * d, 0.5 * float(self.k @ (d * d))
+
+    def _drift_of(self, u: np.ndarray) -> np.ndarray:
+        """The storey drifts of floor displacements ``u`` (an array nobody writes to)."""
+        return _drift(u)
 
     def initial_state(self, u0, v0, force=None) -> BuildingState:
         """The elastic initial state at ``(u0, v0)``; peaks start from its values."""
@@ -432,6 +436,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         self._drift_rows = np.eye(n) - np.eye(n, k=-1)   # d = D u
         self._peak_atol = np.repeat(np.array(PEAK_ATOL), n)
+        self._peak_atol_list = self._peak_atol.tolist()
+        self._all_functions = list(range(3 * n))        # _peaks' candidates when tier 1 flagged none
         self._inv_m = 1.0 / self.masses
         self._plans: dict[int, tuple] = {}
         # the bilinear law's constants, as hysteresis.py's functions compute them (bit for bit)
@@ -439,6 +445,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._hard_k = self.alpha * self.k                  # the hardening spring
         self._law_memo = None
         self._shear_memo = None
+        self._drift_memo = None     # (u, its drifts) of the last displacement array asked (_drift_of)
         self._cover_memo = None
         self._covered_memo = None
         self._yield_q = (1.0 - self.alpha) * self.fy       # the plastic element's strength (N)
@@ -447,6 +454,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._soft_list, self._qy_list = self._elastic_k.tolist(), self._yield_q.tolist()
         limit = self.dy * (1.0 - 1e-12)       # _second_order_quiet's yield limits, made once
         self._second_order_limits = (limit, -limit)
+        self._second_order_limit_lists = (limit.tolist(), (-limit).tolist())
+        self._dy_list = self.dy.tolist()
         # a linear building's one-interval step matrices by canonical length, and by every
         # exact length asked (ramp_step)
         self._ramps: dict[float, RampStep] = {}
@@ -455,6 +464,18 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         self._legacy_parts = None              # legacy_rows' constant rows, made at its first call
 
     # -- bilinear storey state -----------------------------------------------------------------
+    def _drift_of(self, u: np.ndarray) -> np.ndarray:
+        """:func:`_drift` of ``u``, remembered for the array object last asked (a state's arrays
+        are replaced, never changed in place, and nobody writes to the drifts returned): a
+        segment's end drifts (:meth:`_yield_along`) are the next segment's start drifts and the
+        published ones."""
+        memo = self._drift_memo
+        if memo is not None and memo[0] is u:
+            return memo[1]
+        d = _drift(u)
+        self._drift_memo = (u, d)
+        return d
+
     def _law_facts(self, mode: np.ndarray):
         """``(mode, yielding mask, any yielding, q of the yielding storeys, (1 - alpha) Fy mode,
         mode dy)`` of a mode array, remembered for the array object last seen (a state's mode is
@@ -1143,34 +1164,45 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             peak_flags = unload_flags = up_flags = down_flags = None
             quiet = False      # True: tier 1 proved that no storey changes state in this segment
             if change is not None:
-                bound = change @ np.abs(scan_vector[-4 * n:])
+                # on Python floats and bools, function by function: the same IEEE operations as
+                # numpy's elementwise ones (so the same decisions), without a numpy call per
+                # operation on the few storeys' 4n watched functions
+                bound = (change @ np.abs(scan_vector[-4 * n:])).tolist()
                 if ag1 != 0.0:
-                    bound += abs(ag1) * smap.ramp_change
-                watched[2 * n:3 * n] += p * self._inv_m
+                    slope = abs(ag1)
+                    bound = [b + slope * r for b, r in zip(bound, smap.ramp_change.tolist())]
+                watched = watched.tolist()
+                for i, offset in enumerate((p * self._inv_m).tolist()):
+                    watched[2 * n + i] += offset          # the accelerations' constant part p / m
                 # strict (no tolerance): a segment cleared here records no end value
-                peak_flags = np.abs(watched[:3 * n]) + bound[:3 * n] > state.peaks
+                peak_flags = [abs(g) + b > peak for g, b, peak in zip(watched[:3 * n], bound, state.peaks.tolist())]
                 if inelastic:
                     # elastic storeys stay inside |d - s| < dy, yielding ones keep mode d' > 0
-                    e0 = watched[n:2 * n] - state.slip
+                    e0 = [d - s for d, s in zip(watched[n:2 * n], state.slip.tolist())]
                     reach = bound[n:2 * n]
+                    dy = self._dy_list
+                    el = elastic.tolist()
                     if yielding:
-                        margin = np.where(elastic, self.dy - np.abs(e0) - reach,
-                                          state.mode * watched[3 * n:] - bound[3 * n:])
-                    else:      # every storey elastic: np.where's first branch, fewer operations
-                        margin = self.dy - np.abs(e0) - reach
-                    quiet = bool(margin.min() > 0.0)
+                        modes, rate = state.mode.tolist(), watched[3 * n:]
+                        quiet = all((dy[i] - abs(e0[i]) - reach[i] if el[i] else modes[i] * rate[i] - bound[3 * n + i])
+                                    > 0.0 for i in range(n))
+                    else:      # every storey elastic
+                        quiet = all(dy[i] - abs(e0[i]) - reach[i] > 0.0 for i in range(n))
                     if not quiet:
-                        up_flags = elastic & (e0 + reach >= self.dy)
-                        down_flags = elastic & (e0 - reach <= -self.dy)
+                        # the storeys left, as lists of bools, which _second_order_quiet narrows
+                        # and _first_event reads
+                        up_flags = [el[i] and e0[i] + reach[i] >= dy[i] for i in range(n)]
+                        down_flags = [el[i] and e0[i] - reach[i] <= -dy[i] for i in range(n)]
                         if yielding:
-                            unload_flags = ~elastic & (state.mode * watched[3 * n:] - bound[3 * n:] <= 0.0)
+                            unload_flags = [not el[i] and modes[i] * rate[i] - bound[3 * n + i] <= 0.0
+                                            for i in range(n)]
                         else:      # no yielding storey to unload
-                            unload_flags = np.zeros(n, dtype=bool)
+                            unload_flags = [False] * n
                         quiet = self._second_order_quiet(cfg, state, elastic, e0, watched[3 * n:], scan_vector,
                                                          ag1, rem, up_flags, down_flags, unload_flags)
                 else:
                     quiet = True
-                if quiet and not peak_flags.any():
+                if quiet and not any(peak_flags):
                     cost.cleared += 1
                     # tier 1 kept every |drift| under its peak: a covered storey's shear cannot pass its own
                     if inelastic:
@@ -1200,8 +1232,11 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 # (a storey whose |drift| tier 1 kept under its peak is covered as above)
                 if inelastic:
                     covered, mask = self._shear_covered(state)
-                    storeys = None if peak_flags is None else peak_flags[n:2 * n] | ~mask
-                    if storeys is None or storeys.any():
+                    if peak_flags is None:
+                        storeys = None
+                    else:
+                        storeys = [f or not m for f, m in zip(peak_flags[n:2 * n], mask.tolist())]
+                    if storeys is None or any(storeys):
                         self._track_shear(state, cfg, y, z1, stop, scan=scan, segment=segment,
                                           drift_reach=None if change is None else bound[n:2 * n], storeys=storeys)
                 self._commit(state, z1, force, e_damp, e_in, yielding)
@@ -1242,23 +1277,34 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """
         n = self.n
         M, Ra, Rb = cfg.drift_curvature_rows()
-        bound = M @ np.abs(scan_vector[-4 * n:])
+        bound = (M @ np.abs(scan_vector[-4 * n:])).tolist()
+        # on Python floats, storey by storey: the same IEEE operations as numpy's elementwise
+        # ones (so the same decisions) without a numpy call per operation on a few storeys; the
+        # flags are lists of bools, narrowed in place
         if ag1 != 0.0:
-            bound += abs(ag1) * (length * Ra + Rb)
+            slope = abs(ag1)
+            bound = [b + slope * (length * ra + rb) for b, ra, rb in zip(bound, *cfg.drift_curvature_lists())]
         half = 0.5 * length * length * math.exp(cfg.growth_rate * length)
-        rem2 = bound[:n] * half
-        e1 = e0 + rate0 * length
-        limit, low = self._second_order_limits
-        up_flags &= np.maximum(e0, e1) + rem2 >= limit
-        down_flags &= np.minimum(e0, e1) - rem2 <= low
-        if not unload_flags.any():       # no yielding storey left to test (all elastic: most segments)
-            return not (up_flags.any() or down_flags.any())
+        limit, low = self._second_order_limit_lists
+        for i in range(n):
+            if up_flags[i] or down_flags[i]:
+                rem2 = bound[i] * half
+                a = e0[i]
+                b = a + rate0[i] * length
+                hi, lo = (a, b) if a >= b else (b, a)
+                up_flags[i] = up_flags[i] and hi + rem2 >= limit[i]
+                down_flags[i] = down_flags[i] and lo - rem2 <= low[i]
+        if not any(unload_flags):       # no yielding storey left to test (all elastic: most segments)
+            return not (any(up_flags) or any(down_flags))
         m = 3 * n                                # rows of each block of the scan vector; block 4: g''(0)
-        mode = state.mode
-        g0 = mode * rate0
-        g1 = g0 + mode * scan_vector[4 * m + n:4 * m + 2 * n] * length - bound[n:] * half
-        unload_flags &= np.minimum(g0, g1) <= 1e-12 * np.abs(g0)
-        return not (up_flags.any() or down_flags.any() or unload_flags.any())
+        mode = state.mode.tolist()
+        curvature = scan_vector[4 * m + n:4 * m + 2 * n].tolist()
+        for i in range(n):
+            if unload_flags[i]:
+                g0 = mode[i] * rate0[i]
+                g1 = g0 + mode[i] * curvature[i] * length - bound[n + i] * half
+                unload_flags[i] = (g0 if g0 <= g1 else g1) <= 1e-12 * abs(g0)
+        return not (any(up_flags) or any(down_flags) or any(unload_flags))
 
     def _storey_shear_at(self, state, d):
         """``V`` of drifts ``d`` (any shape ending in n) in the state's yield pattern: a yielding
@@ -1285,18 +1331,20 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if memo is None or memo[0] is not state.peak_shear or memo[1] is not state.yielded:
             # the largest P for which that bound stays at the peak, per storey: changes only when
             # a peak shear grows or a storey first yields (the drift peaks change far more often)
-            V = state.peak_shear * (1.0 + 1e-12)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                level = np.where(self._hard_k > 0.0, (V - self._yield_q) / self._hard_k,
-                                 np.where(V >= self._yield_q, np.inf, -np.inf))
-            level[~state.yielded] = np.inf     # not tracked (peak_storey_shear: k times the peak drift)
+            # (on Python floats, storey by storey: the same operations as elementwise numpy, without
+            # an errstate context and a dozen calls; a storey not yielded is not tracked,
+            # peak_storey_shear: k times the peak drift)
+            V = (state.peak_shear * (1.0 + 1e-12)).tolist()
+            level = np.array([((v - q) / h if h > 0.0 else (math.inf if v >= q else -math.inf)) if y else math.inf
+                              for v, q, h, y in zip(V, self._qy_list, self._hard_list, state.yielded.tolist())])
             memo = self._cover_memo = (state.peak_shear, state.yielded, level)
             self._covered_memo = None
         known = self._covered_memo
         if known is not None and known[0] is state.peaks:
             return known[1]
-        mask = state.peak_drift <= memo[2]
-        result = (bool(mask.all()), mask)
+        n = self.n
+        mask = state.peaks[n:2 * n] <= memo[2]       # the drift peaks
+        result = (all(mask.tolist()), mask)
         self._covered_memo = (state.peaks, result)
         return result
 
@@ -1316,15 +1364,19 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         n = self.n
         # on Python floats: the storeys asked are few (those whose drift tier 1 did not clear)
         # (a storey that has not yielded is not tracked: peak_storey_shear)
-        asked = state.yielded if storeys is None else storeys & state.yielded
-        which = asked.nonzero()[0].tolist()
+        if storeys is None:
+            which = state.yielded.nonzero()[0].tolist()
+        elif type(storeys) is list:     # (_interval's flags)
+            which = [i for i, (a, b) in enumerate(zip(storeys, state.yielded.tolist())) if a and b]
+        else:
+            which = (storeys & state.yielded).nonzero()[0].tolist()
         if not which:
             return
         u1, u0 = z1[:n].tolist(), y[:n].tolist()
         mode, slip = state.mode.tolist(), state.slip.tolist()
         k, hard, soft, qy = self._k_list, self._hard_list, self._soft_list, self._qy_list
         peak = state.peak_shear.tolist()
-        reach_rows = None if drift_reach is None else drift_reach.tolist()
+        reach_rows = drift_reach if drift_reach is None or type(drift_reach) is list else drift_reach.tolist()
         if scan is not None:
             G, B = scan.G[n:2 * n].tolist(), scan.B[n:2 * n, 0].tolist()      # the drift rows
         w4 = length ** 4 / 384.0
@@ -1425,8 +1477,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         the segment (unloading is an event), its slip follows the drift."""
         _, yielding, any_yielding, _, work, offset = self._law_facts(state.mode)
         if any_yielding:
-            d0 = _drift(state.u)
-            d1 = _drift(u1)
+            d0 = self._drift_of(state.u)
+            d1 = self._drift_of(u1)
             state.E_hysteretic += float(work @ (d1 - d0))      # elastic storeys: mode 0
             state.slip = np.where(yielding, d1 - offset, state.slip)
 
@@ -1468,20 +1520,22 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """
         n = self.n
         mode = state.mode
+        modes = mode.tolist()
         if up_flags is None:
-            elastic = mode == 0
-            up_flags = down_flags = elastic
-            unload_flags = ~elastic
+            ups = downs = [m == 0 for m in modes]
+            unloads = [m != 0 for m in modes]
+            storeys = list(range(n))
+        else:       # lists of bools (_interval, _second_order_quiet)
+            ups, downs, unloads = up_flags, down_flags, unload_flags
+            storeys = [i for i in range(n) if ups[i] or downs[i] or unloads[i]]
         w4 = rem ** 4 / 384.0
-        storeys = np.flatnonzero(up_flags | down_flags | unload_flags).tolist()
         if not storeys:
             return segment, None
         # The tests on Python floats: the same IEEE double operations as on numpy scalars (so
         # the same bits and decisions), at a fraction of their cost per operation.
         G = scan.G[n:2 * n].tolist()                    # the drift rows
         B = scan.B[n:2 * n].tolist()
-        modes, slips, dys = mode.tolist(), state.slip.tolist(), self.dy.tolist()
-        ups, downs, unloads = up_flags.tolist(), down_flags.tolist(), unload_flags.tolist()
+        slips, dys = state.slip.tolist(), self._dy_list
         candidates = []
         # (each Hermite range only where its cheaper bound, _hermite_spread, leaves the test
         # open: where that bound decides, the range decides the same, rounding being monotonic)
@@ -1522,20 +1576,23 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         for i, kind in candidates:
             # the modal row of the event function, kept by the configuration (the same product)
             key = (i, kind, modes[i])
-            c_modal = event_rows.get(key)
-            if c_modal is None:
+            rows = event_rows.get(key)
+            if rows is None:
                 row = np.zeros(2 * n)
                 if kind == 0:
                     row[n:] = mode[i] * D[i]         # g = mode d' >= 0 until unloading
                 else:
                     row[:n] = -kind * D[i]           # g = dy - kind (d - s) >= 0 until yield
-                c_modal = event_rows[key] = row @ cfg.V
+                c_modal = row @ cfg.V
+                rows = event_rows[key] = (c_modal, np.abs(c_modal))
+            c_modal, c_abs = rows
             offset = 0.0 if kind == 0 else self.dy[i] + kind * state.slip[i]
             horizon = rem if best is None else best[0]
             if horizon <= 0.0:
                 return segment, best
             cost.root_searches += 1
-            t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET)
+            t = first_root(segment, c_modal, 0, offset, horizon, xtol, min_width=xtol, budget=_ROOT_BUDGET,
+                           c_modal_abs=c_abs)
             if t is not None and (best is None or t < best[0]):
                 best = (t, int(i), kind)
         return segment, best
@@ -1551,12 +1608,23 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """
         n = self.n
         G, B = scan.G, scan.B
-        g1 = G[:, 1].copy()
-        accel_offset = p * self._inv_m
-        g1[2 * n:] += accel_offset
-        new = np.maximum(state.peaks, np.abs(g1))
         w4 = length ** 4 / 384.0
-        limits = new + self._peak_atol
+        accel_offset = p * self._inv_m
+        prefilter = 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM)
+        if prefilter:
+            g1 = G[:, 1].copy()
+            g1[2 * n:] += accel_offset
+            new = np.maximum(state.peaks, np.abs(g1))
+            limits = new + self._peak_atol
+        else:
+            # the few functions of a low building on Python floats: the same IEEE operations as
+            # the arrays' (np.maximum's NaN included), without a numpy call for each
+            g1 = G[:, 1].tolist()
+            for i, offset in enumerate(accel_offset.tolist()):
+                g1[2 * n + i] += offset
+            raised = [b if b > a or b != b else a for a, b in zip(state.peaks.tolist(), map(abs, g1))]
+            new = np.array(raised)
+            limits = [a + b for a, b in zip(raised, self._peak_atol_list)]
         # Drop at once the functions that the Hermite test below provably drops: on [0, 1] a
         # cubic Hermite through end values g0, g1 and slopes d0, d1 stays within max(|g0|, |g1|)
         # + 4/27 (|d0| + |d1|) (its basis: h00 + h01 = 1, both in [0, 1]; |h10|, |h11| <= 4/27),
@@ -1565,8 +1633,10 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # being monotonic, a function this bound keeps under its limit fails the test too.
         # (a dozen numpy calls: worth it from about 16 candidates, measured; fewer are tested
         # one by one at once)
-        keep = np.ones(3 * n, dtype=bool) if flags is None else flags
-        if 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM):
+        keep = flags
+        if prefilter:
+            if keep is None:
+                keep = np.ones(3 * n, dtype=bool)
             g0v = np.abs(G[:, 0] + self._watch_offset(accel_offset))
             g1v = np.abs(g1)
             s0v, s1v = np.abs(G[:, 2]), np.abs(G[:, 3])
@@ -1582,19 +1652,28 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 s0v + s1v + curvatures) - B[:, 1] * w4 > 0.0
             monotonic &= G[:, 2] * G[:, 3] > 0.0
             keep = keep & ~(reach <= limits) & ~monotonic
-        candidates = keep.nonzero()[0].tolist()
-        if not candidates:            # every function cleared: only the end values count
-            state.peaks = new
-            return
+        if keep is None:
+            # every function a candidate (no prefilter for a few storeys): all rows, in order
+            candidates = self._all_functions
+            rows, bounds = G.tolist(), B.tolist()
+        else:
+            # (_interval's flags are a list of bools)
+            candidates = [j for j, f in enumerate(keep) if f] if type(keep) is list else keep.nonzero()[0].tolist()
+            if not candidates:            # every function cleared: only the end values count
+                state.peaks = new
+                return
+            rows, bounds = G[candidates].tolist(), B[candidates].tolist()
         # The tests run on Python floats: the same IEEE double operations as on numpy scalars
         # (so the same bits), at a fraction of their cost per operation.
         # (only the candidates' rows: most segments leave a few of the 3n functions)
         # (rows gathered apart: np.column_stack cost more than the tests of a few candidates)
-        ends, limit_list = g1.tolist(), limits.tolist()
+        if prefilter:
+            ends, limit_list = g1.tolist(), limits.tolist()
+        else:
+            ends, limit_list = g1, limits
         offsets = accel_offset.tolist()
         deferred = []
-        for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, G[candidates].tolist(),
-                                                               B[candidates].tolist()):
+        for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, rows, bounds):
             end, limit = ends[j], limit_list[j]
             if j >= 2 * n:
                 g0 = g0 + offsets[j - 2 * n]

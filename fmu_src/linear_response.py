@@ -53,6 +53,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import eig, get_lapack_funcs, lu_factor
+
+try:        # what np.einsum calls without `optimize` (its Python wrapper costs as much as the sum)
+    from numpy._core.multiarray import c_einsum as _c_einsum
+except ImportError:         # another numpy layout: the public function, the same arithmetic
+    _c_einsum = np.einsum
 try:        # scipy's own workspace query for eig's geev (private: _eigen falls back to eig without it)
     from scipy.linalg.lapack import _compute_lwork
 except ImportError:       # pragma: no cover - a scipy that moved it
@@ -471,6 +476,9 @@ class Configuration:
         powers[:, 3] = self.lam3
         powers[:, 4] = self.lam4
         self.lam_powers = powers
+        # Scan's: where its vector's blocks end (6 blocks of the 3n tracked functions, then Re W z'(0))
+        # and the columns |lam|^3..4 and |lam|^2..3 (views)
+        self.scan_parts = (18 * n, 20 * n, powers[:, 3:5], powers[:, 2:4])
         self.rate = max(self.lam_abs.tolist()) if n else 0.0
         self.growth_rate = max(0.0, max(lam.real.tolist()))   # > 0 only by round-off
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w (the building's, ConfigurationConstants).
@@ -499,8 +507,9 @@ class Configuration:
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
         self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
         # modal rows of the event functions searched in this configuration, by (storey, kind,
-        # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event): at most 3n
-        self.event_rows: dict[tuple, np.ndarray] = {}
+        # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event), with their
+        # magnitudes: (row, |row|), at most 3n
+        self.event_rows: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
     # -- evaluation -------------------------------------------------------------------------
     def forcing(self, w: np.ndarray, s: float = 0.0) -> np.ndarray:
@@ -555,7 +564,8 @@ class Configuration:
 
     def quadrature(self, v: np.ndarray, nodes: np.ndarray, weights: np.ndarray, w: np.ndarray):
         """:meth:`energies` from the floor velocities ``v`` (n, K) at the quadrature nodes."""
-        damping = float(np.einsum("k,ik,ik->", weights, v, self.C @ v))
+        # (np.einsum without optimize is c_einsum itself: called directly, the same sums)
+        damping = float(_c_einsum("k,ik,ik->", weights, v, self.C @ v))
         ag = w[0] + w[1] * nodes
         work = -float((weights * ag) @ (self.masses @ v))
         return damping, work
@@ -710,6 +720,14 @@ class Configuration:
             rows = self._drift_curvature = (M, Ra, Rb)
         return rows
 
+    def drift_curvature_lists(self) -> tuple[list, list]:
+        """``(Ra, Rb)`` of :meth:`drift_curvature_rows` as lists of Python floats (made once)."""
+        lists = getattr(self, "_drift_curvature_lists", None)
+        if lists is None:
+            _, Ra, Rb = self.drift_curvature_rows()
+            lists = self._drift_curvature_lists = (Ra.tolist(), Rb.tolist())
+        return lists
+
     def scan_rows(self, state_map: np.ndarray, length: float) -> np.ndarray:
         """The matrix giving a segment's :class:`Scan` vector from ``y = [z0; w]``."""
         A, F = self.A, self.peak_rows
@@ -776,22 +794,21 @@ class Scan:
     __slots__ = ("G", "B")
 
     def __init__(self, cfg: "Configuration", vector: np.ndarray, ag_slope: float, length: float):
-        m = cfg.peak_rows.shape[0]
-        two_n = 2 * cfg.n
-        self.G = vector[:6 * m].reshape(6, m).T
-        re = vector[6 * m:6 * m + two_n]
-        im = vector[6 * m + two_n:]
+        # (the configuration's sizes and column views, made once: a Scan is made per segment)
+        m6, re_end, lam34, lam23 = cfg.scan_parts
+        self.G = vector[:m6].reshape(6, -1).T
+        re = vector[m6:re_end]
+        im = vector[re_end:]
         amp = np.sqrt(re * re + im * im)
-        lam = cfg.lam_powers          # columns |lam|^0 .. |lam|^4
         if ag_slope != 0.0:
             ramp = abs(ag_slope) * cfg.ramp_abs
             amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
             # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
-            powers = lam[:, 3:5] * amp[:, None] + lam[:, 2:4] * ramp[:, None]
+            powers = lam34 * amp[:, None] + lam23 * ramp[:, None]
         else:
             if cfg.growth_rate:
                 amp = amp * math.exp(cfg.growth_rate * length)
-            powers = lam[:, 3:5] * amp[:, None]
+            powers = lam34 * amp[:, None]
         self.B = cfg.peak_modal_abs @ powers
 
 
@@ -831,6 +848,14 @@ class ModalSegment:
             term = lam * term + (self.beta1 if j == 2 else 0.0)
             out.append(float((c_modal @ term).real))
         return out
+
+    def start_values(self, c_modal: np.ndarray, c_modal_abs: np.ndarray) -> tuple[list[float], list[float]]:
+        """``(derivatives(c_modal, 0, 3), magnitudes(c_modal_abs, 0, 3))`` (:func:`first_root`'s
+        start) with ``q''(0)`` formed once: the same operations, so the same values."""
+        q, dq = self.modal_derivatives(0.0)
+        term = self.cfg.lam * dq + self.beta1
+        return ([float((c_modal @ q).real), float((c_modal @ dq).real), float((c_modal @ term).real)],
+                [float(c_modal_abs @ np.abs(q)), float(c_modal_abs @ np.abs(dq)), float(c_modal_abs @ np.abs(term))])
 
     def evaluator(self, c_modal: np.ndarray, count: int):
         """``s -> derivatives(c_modal, s, count)``: what the searches call at every point."""
@@ -904,7 +929,7 @@ class TaylorScan:
     def state_and_scan(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """``(z(s), the scan vector of [0, s])``: what :meth:`Configuration.scan_vector` gives."""
         K = self.degree
-        powers = np.cumprod(np.full(K + 1, s))
+        powers = np.full(K + 1, s).cumprod()         # (the method: np.cumprod's wrapper costs as much)
         powers[1:] = powers[:-1]
         powers[0] = 1.0
         # the value, slope and curvature of every power at 0 and at s, as columns
@@ -924,7 +949,7 @@ class TaylorScan:
         nodes, weights = cfg.chunk_nodes(length)
         powers = np.ones((self.degree + 1, nodes.size))
         powers[1:] = nodes
-        np.cumprod(powers, axis=0, out=powers)
+        powers.cumprod(axis=0, out=powers)
         return cfg.quadrature(self.Z[cfg.n:] @ powers, nodes, weights, w)
 
 
@@ -958,8 +983,7 @@ class TaylorSegment(ModalSegment):
         dq0 = self._dq0 = cfg.lam * self.q0 + self.beta0
         # the start needs no evaluation: what modal_at(0) gives, bit for bit
         self._memo[0.0] = (self.q0, dq0)
-        self._amp0 = np.abs(dq0)
-        self._ramp = np.abs(self.beta1)
+        self._amp0 = self._ramp = None      # |q'(0)|, |beta1|: made at the first bound (_bound_parts)
         self._taylor = None                 # the columns, made at their first use
         self._bounds = {}                   # see _bound_parts
 
@@ -1019,7 +1043,7 @@ class TaylorSegment(ModalSegment):
         columns = self.taylor()
         if columns is None:
             return self.cfg.state_at(self.q0, self.beta0, self.beta1, s)
-        powers = np.cumprod(np.full(columns.shape[1], s))
+        powers = np.full(columns.shape[1], s).cumprod()
         powers[1:] = powers[:-1]
         powers[0] = 1.0
         return (self.cfg.V @ (columns @ powers)).real
@@ -1033,7 +1057,7 @@ class TaylorSegment(ModalSegment):
         nodes, weights = cfg.chunk_nodes(length)
         powers = np.ones((columns.shape[1], nodes.size))
         powers[1:] = nodes
-        np.cumprod(powers, axis=0, out=powers)
+        powers.cumprod(axis=0, out=powers)
         v = (cfg.V[cfg.n:] @ (columns @ powers)).real
         return cfg.quadrature(v, nodes, weights, w)
 
@@ -1058,6 +1082,9 @@ class TaylorSegment(ModalSegment):
         key = id(c_modal_abs)
         hit = self._bounds.get(key)
         if hit is None or hit[0] is not c_modal_abs:
+            if self._amp0 is None:
+                self._amp0 = np.abs(self._dq0)
+                self._ramp = np.abs(self.beta1)
             powers = self.cfg.lam_powers
             weights = c_modal_abs
             amp0 = weights @ (powers * self._amp0[:, None])
@@ -1093,7 +1120,7 @@ def _taylor_powers(lam, degree: int) -> tuple:
     k = np.arange(2, degree + 1, dtype=float)
     P = np.ones((lam.size, degree), dtype=complex)
     P[:, 1:] = lam[:, None] / np.arange(1, degree, dtype=float)
-    np.cumprod(P, axis=1, out=P)
+    P.cumprod(axis=1, out=P)
     return P[:, 1:], P[:, :-1] / (k - 1.0), k, degree
 
 
@@ -1129,7 +1156,8 @@ def _cubic_lower_bound_positive(g0: float, g1: float, g2: float, bound3: float, 
 
 
 def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset: float,
-               length: float, xtol: float, min_width: float, budget: int = 200) -> float | None:
+               length: float, xtol: float, min_width: float, budget: int = 200,
+               c_modal_abs: np.ndarray | None = None) -> float | None:
     """First s in [0, length] where ``g = c' z^(order) + offset`` reaches 0 from above, or None.
 
     ``g`` should be >= 0 at s = 0; it may start at 0 (a storey that has just switched sits at
@@ -1141,11 +1169,14 @@ def first_root(segment: "ModalSegment", c_modal: np.ndarray, order: int, offset:
     sign change is refined by bracketed Newton to ``xtol``.  The time returned is on or past
     the crossing (``g <= 0`` there): the state handed to the next law lies on the new side, or
     the switch would be undone at once.  A touch without crossing narrower than ``min_width``
-    is not a root (a graze).
+    is not a root (a graze).  ``c_modal_abs``: ``|c_modal|`` if the caller keeps it.
     """
-    c_abs = np.abs(c_modal)
-    start = segment.derivatives(c_modal, 0.0, order + 3)[order:]
-    scale = segment.magnitudes(c_abs, 0.0, order + 3)[order:]
+    c_abs = np.abs(c_modal) if c_modal_abs is None else c_modal_abs
+    if order == 0:
+        start, scale = segment.start_values(c_modal, c_abs)
+    else:
+        start = segment.derivatives(c_modal, 0.0, order + 3)[order:]
+        scale = segment.magnitudes(c_abs, 0.0, order + 3)[order:]
     tol = [ROUNDOFF * m for m in scale]
     tol[0] += ROUNDOFF * abs(offset)
     g0 = start[0] + offset
