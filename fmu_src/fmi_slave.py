@@ -41,7 +41,6 @@ from __future__ import annotations
 import copy
 import ctypes
 import functools
-import gc
 import math
 import operator
 import sys
@@ -322,27 +321,16 @@ class SlaveBase(Fmi2Slave):
                     strings.add(var.attribute)
         for attr, size in arrays.items():
             setattr(self, attr, np.zeros(size, dtype=object if attr in strings else float))
-        # The registration makes ~10 objects per variable (building.fmu: 464 variables), all kept
-        # by the instance: garbage collections triggered by these allocations find nothing to free
-        # and cost as much as the registration itself (building.fmu: 4.4 against 2.3 ms per
-        # instance, measured), so the collector pauses meanwhile (as it was after: a host that
-        # turned it off keeps it off)
-        collecting = gc.isenabled()
-        gc.disable()
-        try:
-            for var in self.VARIABLES:
-                self._register(var)
-                slot = (var, var.attribute, var.index)
-                if var.causality == "input" and var.type == "Real":
-                    self._real_inputs.append(slot)
-                if var.causality == "output" and var.type == "Real":
-                    self._real_outputs.append(slot)
-                if var.causality == "parameter" and (var.low is not None or var.high is not None
-                                                      or var.choices is not None or var.type == "Real"):
-                    self._checked.append(slot)
-        finally:
-            if collecting:
-                gc.enable()
+        for var in self.VARIABLES:
+            self._register(var)
+            slot = (var, var.attribute, var.index)
+            if var.causality == "input" and var.type == "Real":
+                self._real_inputs.append(slot)
+            if var.causality == "output" and var.type == "Real":
+                self._real_outputs.append(slot)
+            if var.causality == "parameter" and (var.low is not None or var.high is not None
+                                                  or var.choices is not None or var.type == "Real"):
+                self._checked.append(slot)
         # the scalar Real outputs in one C call, the arrays whole (a Python loop over the outputs
         # cost 3.5 us per step on pounding.fmu, a third of its doStep)
         scalars = [a for _, a, i in self._real_outputs if i is None]
