@@ -327,3 +327,23 @@ def test_bilinear_pair_ground_response_is_the_full_kernels(seed):
                       for b in pair.bounds])
     assert np.abs(want).max() > 1e3 * gap_bound.EXACT_MARGIN       # a response worth the name
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_ground_bound_after_on_grid_is_running_max_abs_bit_for_bit(seed):
+    """GroundAhead's bound on |ag| (called by a proof through yielding after the linear proof took
+    on_grid) starts from on_grid's |g| at the grid points instead of interpolating again: the same
+    numbers, bit for bit, as running_max_abs from scratch and as a fresh GroundAhead; horizons
+    with knots inside grid intervals, none, and t0 on a knot."""
+    rng = np.random.default_rng(600 + seed)
+    knots = np.concatenate(([-1.0], np.sort(rng.uniform(0.0, 3.0, 80)), [5.0]))
+    values = rng.normal(0.0, 3.0, knots.size)
+    for k in range(40):
+        H = float(rng.choice([0.01, 0.05, 0.33, 0.65, 0.17 + 1e-15]))
+        t0 = float(knots[int(rng.integers(1, 70))]) if k % 5 == 0 else float(rng.uniform(0.0, 2.3))
+        want = running_max_abs(knots, values, t0, H)
+        ground = GroundAhead(knots, values, t0, H)
+        assert ground().tobytes() == want.tobytes()                 # before on_grid
+        ground = GroundAhead(knots, values, t0, H)
+        ground.on_grid(np.empty(GRID + 1))
+        assert ground().tobytes() == want.tobytes(), (seed, k, H, t0)

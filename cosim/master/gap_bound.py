@@ -143,6 +143,9 @@ _ZERO = np.zeros(1)
 #: ``ndarray.all/any`` without their Python wrappers (a proof makes a few dozen small numpy calls:
 #: their overhead is its cost)
 _ALL, _ANY, _AND, _MAX = np.logical_and.reduce, np.logical_or.reduce, np.logical_and, np.maximum
+#: ``_ANY`` of each part of an array's rows, in one call (``_ANY_EACH(a, starts)``: the parts
+#: begin at ``starts``)
+_ANY_EACH = np.logical_or.reduceat
 #: ``np.cumsum`` of a vector without its Python wrapper
 _SUM_UP = np.add.accumulate
 try:    # np.interp's compiled core, without its Python wrapper (which only dispatches on complex values)
@@ -388,7 +391,8 @@ class ModalBound:
         ``L``, as at ``t = 0``)."""
         m = GRID * KERNEL_SUBDIVISION
         t = H * np.arange(m + 1, dtype=float) / m
-        K = np.abs(weights @ self._free_tables(t, impulse_only=True)[1])
+        K = weights @ self._free_tables(t, impulse_only=True)[1]
+        np.abs(K, out=K)
         dt = H / m
         slope = np.abs(weights).sum(axis=1)[:, None]
         pieces = K[:, :-1] + K[:, 1:]
@@ -916,11 +920,18 @@ class _BilinearPair:
         self.S_r = nl + fr
         self.drift_rows = np.concatenate((np.arange(nl, 2 * nl), np.arange(2 * nl + nr, 2 * n)))
         self._by_h: dict = {}           # H -> stacked tables
-        self._key = None                # the reads (bytes) of the state below
-        self._state = None
+        self._key = None                # the reads (bytes) of the state below (_read)
+        self._parts = np.array([0, nl], dtype=np.intp)      # the stacked rows' buildings begin here
+        self._yielding = None
+        self._levels_shift = None
+        self._bad = np.empty((len(positions), GRID + 1), dtype=bool)     # every level's intervals
         self._motion: dict = {}         # H -> the free linear motion of this state
         self._yielded_state = None      # the modal state of the bounds through yielding (when asked)
-        self._yielded_motion: dict = {}  # H -> their free motion
+        self._yielded_motion: dict = {}  # H -> their free motion's interval means
+        # the bounds through yielding have the buildings' modes (ModalBound.through_yielding: the
+        # same building), so the same q' = to_modal @ v: computed once where their to_modal agree
+        # to the bit (else again, as for any other bound)
+        self._same_modes = all(b.to_modal.tobytes() == y.to_modal.tobytes() for b, y in zip(self.bounds, self.yielded))
         # the ground's response computed while both buildings are proven linear (_ExactPair's
         # argument, about the static shift): every mode has stiffness
         self.stiff = bool(np.all(bl.w > 0.0) and np.all(br.w > 0.0))
@@ -945,7 +956,8 @@ class _BilinearPair:
             (cl[1], cr[1]), (cl[2], cr[2]), (cl[4], cr[4]), (cl[6], cr[6])))
 
     def _read(self, y: np.ndarray) -> None:
-        """The state from the reads (:meth:`OpenGaps._state` of both buildings, stacked)."""
+        """The state from the reads (:meth:`OpenGaps._state` of both buildings, stacked), kept in
+        attributes (a proof reads them without unpacking a tuple)."""
         reads = y[self.reads]
         key = reads.tobytes()
         if key == self._key:
@@ -957,27 +969,33 @@ class _BilinearPair:
         _SUM_UP(r[nl:], out=shift[nl:])
         centre = self.centre_factor * r
         w = u - shift
-        # ElasticRange.yielding: d = D w - centre, |d| >= the limit (D w's first storey is w_0 - 0.0 = w_0)
-        below = np.empty(n)
-        below[1:] = w[:-1]
-        below[0] = below[nl] = 0.0
-        d = w - below
+        # ElasticRange.yielding: d = D w - centre, |d| >= the limit (D w's first storey is w_0 - 0.0,
+        # w_0 to the bit: each building's first storey keeps its floor's w)
+        d = w.copy()
+        d[1:] -= w[:-1]
+        d[nl] = w[nl]
         d -= centre
         bad = np.abs(d, out=d) >= self.yielding_limit
-        yielding = (bool(_ANY(bad[:nl])), bool(_ANY(bad[nl:])))
+        self._yielding = _ANY_EACH(bad, self._parts).tolist()    # per building: [left, right]
         (bl, br), q, qd = self.bounds, np.empty(n), np.empty(n)
         np.matmul(bl.to_modal, w[:nl], out=q[:nl])       # ModalBound.modal_state(w, v), per building
         np.matmul(bl.to_modal, v[:nl], out=qd[:nl])
         np.matmul(br.to_modal, w[nl:], out=q[nl:])
         np.matmul(br.to_modal, v[nl:], out=qd[nl:])
         b = qd + self.zeta_w * q
-        speed = np.sqrt((self.w * q) ** 2 + qd * qd)
+        square = qd * qd                                # kept: the bound through yielding's speed too
+        speed = self.w * q
+        speed *= speed                                  # (w q) ** 2: the same product
+        speed += square
+        np.sqrt(speed, out=speed)
         rate = np.empty(2 * n)                          # FloorMotion's rows' rate bound, per building
         np.matmul(bl.abs_rows, speed[:nl], out=rate[:2 * nl])
         np.matmul(br.abs_rows, speed[nl:], out=rate[2 * nl:])
-        self._state = (yielding, shift, u, v, q[:, None], b[:, None], rate, centre - self.half_width,
-                       centre + self.half_width)
+        self._shift, self._u, self._v, self._qd, self._qd_square = shift, u, v, qd, square
+        self._q, self._b, self._rate = q[:, None], b[:, None], rate
+        self._lo, self._hi = centre - self.half_width, centre + self.half_width
         self._key = key
+        self._levels_shift = None       # the levels' floors' shifts, as columns (when asked)
         self._motion = {}
         self._yielded_state = None
         self._yielded_motion = {}
@@ -1012,14 +1030,14 @@ class _BilinearPair:
         ``rate`` the rows' rate bounds (per row, or per row and interval).  With the ground
         ahead (``ahead``), its response to the grid polyline is computed and only the bend
         between grid points bounded, the rate bound growing with the load (:class:`_ExactPair`)."""
-        yielding, shift, u, v, q, b, rate, lo, hi = self._state
-        Ac, As, rows_ground = self._tables(H)
-        (bl, br), nl, n = self.bounds, self.nl, self.n
+        rate = self._rate
+        tables = self._by_h.get(H) or self._tables(H)
         F = self._motion.get(H)             # the free motion: this state's, per horizon
         if F is None:
-            Q = Ac * q
-            Q += As * b
-            F = np.empty((2 * n, GRID + 1))
+            (bl, br), nl = self.bounds, self.nl
+            Q = tables[0] * self._q
+            Q += tables[1] * self._b
+            F = np.empty((2 * self.n, GRID + 1))
             np.matmul(bl.rows, Q[:nl], out=F[:2 * nl])
             np.matmul(br.rows, Q[nl:], out=F[2 * nl:])
             if len(self._motion) > 8:
@@ -1028,28 +1046,38 @@ class _BilinearPair:
         dS = H / GRID
         rows = self.drift_rows
         if ahead is None:
-            forced = rows_ground * ground
+            forced = tables[2] * ground
             slack = 0.5 * dS * rate[rows][:, None] + forced[rows, 1:]
         else:
             g, rest, integral = ahead.on_grid(self._ground)
-            lags, first = self._kernels(H)
+            lags, first = self._row_kernels.get(H) or self._kernels(H)
             response = lags @ self._toeplitz
             response += first * g[0]
             F = F + response
-            forced = rows_ground * rest
-            rate = rate[:, None] + self._rows_gain * integral[1:]
+            forced = tables[2] * rest
+            rate = self._rows_gain * integral[1:]
+            rate += self._rate[:, None]                 # rate[:, None] + gain * integral: the same sum
             slack = 0.5 * dS * rate[rows] + forced[rows, 1:]
             slack += EXACT_MARGIN
         # band_horizon of both buildings' storeys at once (each building's answer its own)
         D = F[rows]
         x0 = D[:, 0]
+        lo, hi = self._lo, self._hi
         inside = _AND(x0 > lo, x0 < hi)
         mid = D[:, :-1] + D[:, 1:]
         mid *= 0.5
         bad = mid + slack >= hi[:, None]
-        bad |= mid - slack <= lo[:, None]
+        mid -= slack
+        bad |= mid <= lo[:, None]
+        yielding = self._yielding
+        if not (yielding[0] or yielding[1]) and _ALL(inside):     # both inside: one reduction each way
+            first_bad = _ANY_EACH(bad, self._parts)             # per building: [left rows; right rows]
+            first = first_bad.argmax(axis=1).tolist()
+            hit = first_bad[0, first[0]], first_bad[1, first[1]]
+            spans = (float(first[0]) * dS if hit[0] else H, float(first[1]) * dS if hit[1] else H)
+            return F, forced, spans, rate
         spans = []
-        for part, y_b in ((slice(0, nl), yielding[0]), (slice(nl, n), yielding[1])):
+        for part, y_b in ((slice(0, self.nl), yielding[0]), (slice(self.nl, self.n), yielding[1])):
             if y_b or not _ALL(inside[part]):
                 spans.append(0.0)
                 continue
@@ -1059,106 +1087,130 @@ class _BilinearPair:
         return F, forced, tuple(spans), rate
 
     def _through(self, H: float, ground: np.ndarray) -> tuple:
-        """``(free, forced, rate)`` of both buildings' floors through yielding
-        (:meth:`ModalBound.through_yielding`, from the floors' x and v)."""
+        """``(mid, slack)`` of both buildings' floors through yielding (:meth:`ModalBound.through_yielding`,
+        from the floors' x and v): on each grid interval the mean of the free motion's ends, and the
+        free rate's slack plus the forced part at the interval's end (floors x intervals, stacked)."""
         (yl, yr), nl, n = self.yielded, self.nl, self.n
         if self._yielded_state is None:
-            _, _, u, v, *_ = self._state
-            q, qd = np.empty(n), np.empty(n)
+            u = self._u
+            q = np.empty(n)
             np.matmul(yl.to_modal, u[:nl], out=q[:nl])
-            np.matmul(yl.to_modal, v[:nl], out=qd[:nl])
             np.matmul(yr.to_modal, u[nl:], out=q[nl:])
-            np.matmul(yr.to_modal, v[nl:], out=qd[nl:])
+            if self._same_modes:        # q' is the linear bound's (to_modal @ v), and so is its square
+                qd, square = self._qd, self._qd_square
+            else:
+                v, qd = self._v, np.empty(n)
+                np.matmul(yl.to_modal, v[:nl], out=qd[:nl])
+                np.matmul(yr.to_modal, v[nl:], out=qd[nl:])
+                square = qd * qd
             b = qd + self.zeta_w_y * q
-            speed = np.sqrt((self.w_y * q) ** 2 + qd * qd)
+            speed = self.w_y * q
+            speed *= speed
+            speed += square
+            np.sqrt(speed, out=speed)
             rate = np.empty(n)
             np.matmul(yl.abs_phi, speed[:nl], out=rate[:nl])
             np.matmul(yr.abs_phi, speed[nl:], out=rate[nl:])
             self._yielded_state = (q[:, None], b[:, None], rate)
         q, b, rate = self._yielded_state
-        Ac, As, floors_ground, plastic = self._yielded_tables(H)
-        free = self._yielded_motion.get(H)  # the free motion: this state's, per horizon
-        if free is None:
+        Ac, As, floors_ground, plastic = self._by_h.get(("yielded", H)) or self._yielded_tables(H)
+        mid = self._yielded_motion.get(H)  # the free motion's means: this state's, per horizon
+        if mid is None:
             Q = Ac * q
             Q += As * b
             free = np.empty((n, GRID + 1))
             np.matmul(yl.phi, Q[:nl], out=free[:nl])
             np.matmul(yr.phi, Q[nl:], out=free[nl:])
+            mid = free[:, :-1] + free[:, 1:]
+            mid *= 0.5
             if len(self._yielded_motion) > 8:
                 self._yielded_motion.pop(next(iter(self._yielded_motion)))
-            self._yielded_motion[H] = free
+            self._yielded_motion[H] = mid
         forced = floors_ground * ground
-        forced = forced + plastic
-        return free, forced, rate
+        forced += plastic
+        slack = (0.5 * (H / GRID) * rate)[:, None] + forced[:, 1:]
+        return mid, slack
 
     def prove(self, y: np.ndarray, H: float, ground, out: list, ahead: "GroundAhead | None" = None) -> None:
         """Each level's horizon (s, <= H) into ``out`` at its position (:meth:`OpenGaps.horizons`).
         ``ground`` bounds ``|ag|`` on the grid, or with ``ahead`` (the ground ahead, whose response
         the linear proof then computes) returns that bound when called."""
         self._read(y)
-        yielding, shift, _, _, _, _, rate, _, _ = self._state
         dS = H / GRID
         positions = self.positions
+        yielding = self._yielding
         if yielding[0] and yielding[1]:
-            F, forced, (s_l, s_r) = None, None, (0.0, 0.0)
+            s_l = s_r = 0.0
         else:
             F, forced, (s_l, s_r), rate = self._linear(H, ground, ahead)
-        exact = ahead is not None and F is not None
+        # each side's linear bound of the levels' floors ``(x, rate, forced at the intervals' ends)``,
+        # read once by the gaps' linear proof and by the envelopes through yielding (the same
+        # gathers and sums as either made them), only for a building proven linear a while
+        sides = [None, None]
+        if s_l != 0.0 or s_r != 0.0:
+            if self._levels_shift is None:
+                shift = self._shift
+                self._levels_shift = (shift[self.fl][:, None], shift[self.S_r][:, None])
+            for side, (s_b, rows) in enumerate(((s_l, self.F_l), (s_r, self.F_r))):
+                if s_b != 0.0:
+                    x = F[rows]
+                    x += self._levels_shift[side]       # F[rows] + shift[floors][:, None]
+                    sides[side] = (x, rate[rows], forced[rows, 1:])
+        exact = ahead is not None
         if s_l != 0.0 and s_r != 0.0:
-            s = min(s_l, s_r)
-            fl, Fl, Fr, Sr = self.fl, self.F_l, self.F_r, self.S_r
-            xl = F[Fl] + shift[fl][:, None]
-            xr = F[Fr] + shift[Sr][:, None]
-            delta = xl - xr - self.gap
+            (xl, rl, fl_end), (xr, rr, fr_end) = sides
+            delta = xl - xr
+            delta -= self.gap
             upper = delta[:, :-1] + delta[:, 1:]
             upper *= 0.5
             if exact:
-                upper += 0.5 * dS * (rate[Fl] + rate[Fr])
+                upper += 0.5 * dS * (rl + rr)
             else:
-                upper += (0.5 * (rate[Fl] + rate[Fr]) * dS)[:, None]
-            upper += forced[Fl, 1:]
-            upper += forced[Fr, 1:]
+                upper += (0.5 * (rl + rr) * dS)[:, None]
+            upper += fl_end
+            upper += fr_end
             if exact:
                 upper += EXACT_MARGIN
-            _answer(upper, delta[:, 0], positions, out, dS, H, s)
+            _answer(upper, delta[:, 0], positions, out, dS, H, min(s_l, s_r))
         short = [i for i, pos in enumerate(positions) if out[pos] < H]
         if not short:
             return
         # through yielding (OpenGaps._through_yielding): each floor's envelope, the tighter of its
         # linear bound (over the intervals its building provably stays linear) and its bound
         # through yielding (any time)
-        free_y, forced_y, rate_y = self._through(H, ground() if ahead is not None else ground)
-        nl = self.nl
-        fl, fr = self.fl[short], self.fr[short]
+        mid_y, slack_y = self._through(H, ground() if exact else ground)
+        every = len(short) == len(positions)
         half = 0.5 * dS
         envelopes = []
-        for sign, rows_y, s_b, rows_F, rows_S in ((1.0, fl, s_l, fl, fl),
-                                                   (-1.0, nl + fr, s_r, 2 * nl + fr, nl + fr)):
-            edges = []
-            if s_b > 0.0:               # the linear bound's intervals: those ending by s_b
-                x = F[rows_F] + shift[rows_S][:, None]
-                edges.append((x, forced[rows_F, 1:], rate[rows_F], int(round(s_b / dS))))
-            edges.append((free_y[rows_y], forced_y[rows_y, 1:], rate_y[rows_y], GRID))
-            env = None
-            for x, f_end, r, valid in edges:
+        for sign, rows_y, s_b, linear in ((1.0, self.fl, s_l, sides[0]), (-1.0, self.S_r, s_r, sides[1])):
+            if not every:
+                rows_y = rows_y[short]
+            # the bound through yielding (valid over every interval): sign * mid + slack
+            edge = mid_y[rows_y] + slack_y[rows_y] if sign > 0.0 else slack_y[rows_y] - mid_y[rows_y]
+            if linear is not None:      # the linear bound's intervals: those ending by s_b
+                x, r, f_end = linear if every else (part[short] for part in linear)
                 mid = x[:, :-1] + x[:, 1:]
                 mid *= 0.5
                 slack = (half * r if r.ndim == 2 else (half * r)[:, None]) + f_end
                 if r.ndim == 2:
                     slack += EXACT_MARGIN
-                edge = mid + slack if sign > 0.0 else slack - mid
+                linear = mid + slack if sign > 0.0 else slack - mid
+                valid = int(round(s_b / dS))
                 if valid < GRID:
-                    edge[:, valid:] = np.inf
-                env = edge if env is None else np.minimum(env, edge)
-            envelopes.append(env)
-        up, lo = envelopes[0], -envelopes[1]
-        bad = up - lo - self.gap[short] >= 0.0
-        first = bad.argmax(axis=1).tolist()
-        hit = _ANY(bad, axis=1).tolist()
-        for i, f, h in zip(short, first, hit):
+                    linear[:, valid:] = np.inf
+                edge = np.minimum(linear, edge, out=edge)
+            envelopes.append(edge)
+        # up - lo - gap, lo = -(the right envelope): up + env_r is up - lo to the bit; the first
+        # interval that may close (a last column of True: none, H)
+        bad = self._bad if every else np.empty((len(short), GRID + 1), dtype=bool)
+        total = envelopes[0]
+        total += envelopes[1]
+        total -= self.gap if every else self.gap[short]
+        np.greater_equal(total, 0.0, out=bad[:, :GRID])
+        bad[:, GRID] = True
+        for i, f in zip(short, bad.argmax(axis=1).tolist()):
             pos = positions[i]
-            out[pos] = max(out[pos], float(f) * dS if h else H)
-
+            out[pos] = max(out[pos], float(f) * dS if f < GRID else H)
 
 def open_horizon(left: tuple[np.ndarray, np.ndarray, float], right: tuple[np.ndarray, np.ndarray, float],
                  gap: float, H: float) -> float:
@@ -1247,13 +1299,20 @@ def _grid(H: float) -> np.ndarray:
     return grid
 
 
-def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float) -> np.ndarray:
+def running_max_abs(times: np.ndarray, values: np.ndarray, t0: float, H: float,
+                    at_grid: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``max |a|`` over ``[t0, t0 + s_k]`` of the polyline through ``(times, values)`` (which
-    must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2)."""
-    s = t0 + _grid(H)
-    out = _interp(s, times, values)
-    np.abs(out, out=out)
-    _MAX.accumulate(out, out=out)
+    must cover ``[t0, t0 + H]``), on the grid ``s_k = H k / GRID`` (m/s^2).  ``at_grid``: the
+    grid's times ``t0 + s_k`` and ``|a|`` there, if already computed (:meth:`GroundAhead.on_grid`:
+    the same numbers, not again)."""
+    if at_grid is None:
+        s = t0 + _grid(H)
+        out = _interp(s, times, values)
+        np.abs(out, out=out)
+        _MAX.accumulate(out, out=out)
+    else:
+        s, size = at_grid
+        out = _MAX.accumulate(size)
     lo = times.searchsorted(t0, "left")
     hi = times.searchsorted(t0 + H, "right")
     if hi > lo:
@@ -1278,13 +1337,14 @@ class GroundAhead:
     Called, the bound on ``|ag|`` on the grid (:func:`running_max_abs`); :meth:`on_grid`, what
     :class:`_ExactPair` takes."""
 
-    __slots__ = ("times", "values", "t0", "H")
+    __slots__ = ("times", "values", "t0", "H", "_at_grid")
 
     def __init__(self, times: np.ndarray, values: np.ndarray, t0: float, H: float):
         self.times, self.values, self.t0, self.H = times, values, t0, H
+        self._at_grid = None            # (t0 + s_k, |ag| there) once on_grid computed them
 
     def __call__(self) -> np.ndarray:
-        return running_max_abs(self.times, self.values, self.t0, self.H)
+        return running_max_abs(self.times, self.values, self.t0, self.H, self._at_grid)
 
     def peak(self) -> float:
         """A bound on ``|ag|`` over the whole horizon (m/s^2): the largest ``|value|`` of the knots
@@ -1319,6 +1379,7 @@ class GroundAhead:
         else:
             rest = np.zeros(GRID + 1)
         size = np.abs(g)
+        self._at_grid = (s, size)       # what the bound on |ag| starts from (__call__)
         rest += GROUND_ROUNDOFF * float(_MAX.reduce(size))     # size.max() without its Python wrapper
         # int_0^s_k |g_grid|: on each interval at most the mean of its ends' sizes (exact where g
         # keeps its sign), times dS
@@ -1345,10 +1406,12 @@ def floor_forces(n: int, contributions: Sequence[tuple[int, float]]) -> np.ndarr
 
 
 class _Plan(list):
-    """The pairs of one grouping of levels (:meth:`OpenGaps._linear_plan`) and how many horizons
-    they answer (counted once, not at every proof)."""
+    """The pairs of one grouping of levels (:meth:`OpenGaps._linear_plan`,
+    :meth:`OpenGaps._bilinear_plan`) and how many horizons they answer (counted once, not at
+    every proof)."""
 
     answers = 0
+    complete = False
 
 
 class OpenGaps:
@@ -1488,6 +1551,10 @@ class OpenGaps:
         forces = forces or {}
         if self._all_linear:
             return self._linear_horizons(y, H, ground, forces, which)
+        if self.stacked and not forces:
+            plan = self._bilinear_plan(which)
+            if plan.complete:           # every pair two bilinear buildings: the loop below, in short
+                return self._bilinear_horizons(plan, y, H, ground)
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         pairs = self._pairs(which)
@@ -1555,6 +1622,21 @@ class OpenGaps:
                         out[pos] = max(out[pos], s)
         return out
 
+    def _bilinear_horizons(self, plan: list, y: np.ndarray, H: float, ground) -> list[float]:
+        """:meth:`horizons` with no held force where every pair is two bilinear buildings
+        (:class:`_BilinearPair`): the same proofs, without the general loop's set-up."""
+        out = [0.0] * plan.answers
+        exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
+        bound = None                    # the ground bound, evaluated once, if a pair asks for it
+        for pair in plan:
+            if exact and pair.stiff:
+                pair.prove(y, H, ground, out, ground)       # GroundAhead: called, the ground bound
+                continue
+            if bound is None:
+                bound = ground() if callable(ground) else ground
+            pair.prove(y, H, bound, out)
+        return out
+
     # -- linear buildings: the same arithmetic as :meth:`horizons`' linear proof, in fewer calls ----
     def _linear_plan(self, which: Sequence[int] | None, exact: bool = False) -> list:
         """Per pair of :meth:`_pairs`, a :class:`_LinearPair`, or with ``exact`` an
@@ -1581,8 +1663,10 @@ class OpenGaps:
         if plan is not None:
             return plan
         stacked = set(self.elastic) & set(self.yielded)
-        plan = [_BilinearPair(self, *pair) if pair[0] in stacked and pair[1] in stacked else None
-                for pair in self._pairs(which)]
+        plan = _Plan(_BilinearPair(self, *pair) if pair[0] in stacked and pair[1] in stacked else None
+                     for pair in self._pairs(which))
+        plan.answers = sum(len(pair[2]) for pair in self._pairs(which))
+        plan.complete = all(pair is not None for pair in plan)     # every pair stacked
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
