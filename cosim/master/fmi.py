@@ -129,13 +129,27 @@ _FMU_CODE = ("pounding_cosim_", "pythonfmu", "fmu_src")
 
 
 def _inside_fmu(frame) -> bool:
-    """True if the Python stack ending in ``frame`` runs an FMU's code (called from its C side)."""
+    """True if the Python stack ending in ``frame`` runs an FMU's code (called from its C side).
+
+    Instantiation counts whole (:func:`_instantiate` on the stack): pythonfmu's fmi2Instantiate
+    imports the slave's module from C, and the import machinery's frames (``importlib``) run
+    before any of the module's own, so no FMU name is on the stack yet; a KeyboardInterrupt raised
+    there became "Failed to instantiate model" instead of "interrupted" (session 29)."""
     while frame is not None:
         name = frame.f_globals.get("__name__", "")
-        if name.startswith(_FMU_CODE) or frame.f_code is _dispatch_log.__code__:
+        if name.startswith(_FMU_CODE) or frame.f_code in _FMU_CALL_CODES:
             return True
         frame = frame.f_back
     return False
+
+
+def _instantiate(slave, callbacks) -> None:
+    """fmpy's ``instantiate`` of ``slave``; a Ctrl-C during it is held (see :func:`_inside_fmu`)."""
+    slave.instantiate(callbacks=callbacks, loggingOn=True)
+
+
+#: frames of these functions mean an FMU's code runs beneath them (see _inside_fmu)
+_FMU_CALL_CODES = frozenset({_dispatch_log.__code__, _instantiate.__code__})
 
 
 def _on_sigint(signum, frame) -> None:
@@ -401,7 +415,7 @@ class Instance:
                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         _LOADED.add(str(fmu.path))
         self.functions = self._slave._functions  # raw ctypes functions, status returned as int
-        self._slave.instantiate(callbacks=self._callbacks, loggingOn=True)
+        _instantiate(self._slave, self._callbacks)
         self.component = self._slave.component
         self.calls += 1
         #: the component as a C pointer, and the hot calls without argument conversion (_unchecked)
@@ -410,6 +424,9 @@ class Instance:
         self._do_step = self.unchecked["fmi2DoStep"]
         self._do_step_flag = c_int(1)
         self._freed = False
+        if _PENDING_INTERRUPT[0]:   # a Ctrl-C held during instantiation: this instance is not handed out
+            self.free()
+            raise_pending_interrupt()
 
     # -- logging and status ------------------------------------------------------------------
     def _log(self, status, category, message) -> None:
