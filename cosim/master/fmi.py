@@ -134,7 +134,7 @@ def _inside_fmu(frame) -> bool:
     Instantiation counts whole (:func:`_instantiate` on the stack): pythonfmu's fmi2Instantiate
     imports the slave's module from C, and the import machinery's frames (``importlib``) run
     before any of the module's own, so no FMU name is on the stack yet; a KeyboardInterrupt raised
-    there became "Failed to instantiate model" instead of "interrupted" (session 29)."""
+    there became "Failed to instantiate model" instead of "interrupted")."""
     while frame is not None:
         name = frame.f_globals.get("__name__", "")
         if name.startswith(_FMU_CODE) or frame.f_code in _FMU_CALL_CODES:
