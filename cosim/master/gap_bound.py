@@ -1406,12 +1406,10 @@ def floor_forces(n: int, contributions: Sequence[tuple[int, float]]) -> np.ndarr
 
 
 class _Plan(list):
-    """The pairs of one grouping of levels (:meth:`OpenGaps._linear_plan`,
-    :meth:`OpenGaps._bilinear_plan`) and how many horizons they answer (counted once, not at
-    every proof)."""
+    """The pairs of one grouping of levels (:meth:`OpenGaps._linear_plan`) and how many horizons
+    they answer (counted once, not at every proof)."""
 
     answers = 0
-    complete = False
 
 
 class OpenGaps:
@@ -1551,10 +1549,6 @@ class OpenGaps:
         forces = forces or {}
         if self._all_linear:
             return self._linear_horizons(y, H, ground, forces, which)
-        if self.stacked and not forces:
-            plan = self._bilinear_plan(which)
-            if plan.complete:           # every pair two bilinear buildings: the loop below, in short
-                return self._bilinear_horizons(plan, y, H, ground)
         motions = {}
         linear = {}                         # building -> how long it provably stays linear (s)
         pairs = self._pairs(which)
@@ -1622,21 +1616,6 @@ class OpenGaps:
                         out[pos] = max(out[pos], s)
         return out
 
-    def _bilinear_horizons(self, plan: list, y: np.ndarray, H: float, ground) -> list[float]:
-        """:meth:`horizons` with no held force where every pair is two bilinear buildings
-        (:class:`_BilinearPair`): the same proofs, without the general loop's set-up."""
-        out = [0.0] * plan.answers
-        exact = EXACT_GROUND and H >= EXACT_MIN_HORIZON and isinstance(ground, GroundAhead)
-        bound = None                    # the ground bound, evaluated once, if a pair asks for it
-        for pair in plan:
-            if exact and pair.stiff:
-                pair.prove(y, H, ground, out, ground)       # GroundAhead: called, the ground bound
-                continue
-            if bound is None:
-                bound = ground() if callable(ground) else ground
-            pair.prove(y, H, bound, out)
-        return out
-
     # -- linear buildings: the same arithmetic as :meth:`horizons`' linear proof, in fewer calls ----
     def _linear_plan(self, which: Sequence[int] | None, exact: bool = False) -> list:
         """Per pair of :meth:`_pairs`, a :class:`_LinearPair`, or with ``exact`` an
@@ -1663,10 +1642,8 @@ class OpenGaps:
         if plan is not None:
             return plan
         stacked = set(self.elastic) & set(self.yielded)
-        plan = _Plan(_BilinearPair(self, *pair) if pair[0] in stacked and pair[1] in stacked else None
-                     for pair in self._pairs(which))
-        plan.answers = sum(len(pair[2]) for pair in self._pairs(which))
-        plan.complete = all(pair is not None for pair in plan)     # every pair stacked
+        plan = [_BilinearPair(self, *pair) if pair[0] in stacked and pair[1] in stacked else None
+                for pair in self._pairs(which)]
         if len(self._plans) < _PAIRS_KEPT:
             self._plans[key] = plan
         return plan
