@@ -27,6 +27,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from venvs import make_venv, pip_install
 
 from cosim.fmus import FMU_NAMES
 from fmu_src.fmi_slave import HOST_REQUIREMENTS
@@ -49,19 +50,6 @@ HOST = textwrap.dedent('''
         results[name] = {v: float(r[v][-1]) for v in OUT[name]}
     print(json.dumps(results))
 ''' % X0)
-
-
-def make_venv(folder: Path, packages: list[str]) -> Path:
-    """A fresh virtual environment with ``packages``; returns its python."""
-    # pip of this environment installs into the new one (``pip --python``, pip >= 22.3): the new
-    # environment holds ``packages`` and nothing else, not even pip (seeding it costs ~3 s), and
-    # skipping the byte-compilation of numpy and scipy (~5 s) changes nothing the host imports
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(folder)], check=True)
-    python = folder / "bin" / "python"
-    proc = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-compile",
-                           *packages], capture_output=True, text=True)
-    assert proc.returncode == 0, f"pip install {packages} failed:\n{proc.stderr[-2000:]}"
-    return python
 
 
 @pytest.fixture(scope="module")
@@ -129,8 +117,8 @@ def test_a_missing_requirement_is_named_and_the_fmus_requirements_file_installs_
         requirements = z.read("resources/requirements.txt").decode()
     assert requirements.split() == list(HOST_REQUIREMENTS)
     (tmp_path / "requirements.txt").write_text(requirements)
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-compile", "-r",
-                    str(tmp_path / "requirements.txt")], check=True, capture_output=True)   # pip: see make_venv
+    installed = pip_install(python, "-r", str(tmp_path / "requirements.txt"))
+    assert installed.returncode == 0, installed.stderr[-2000:]
     fixed = subprocess.run([str(python), "-I", "noscipy.py", "off"], cwd=host_dir, capture_output=True, text=True)
     assert "host: ran" in fixed.stdout, fixed.stdout + fixed.stderr
 

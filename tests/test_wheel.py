@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from venvs import make_venv
 
 from cosim import __version__
 from cosim.master.runner import run_scene
@@ -52,16 +53,8 @@ def installed(tmp_path_factory):
                             str(source)], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-2000:]
     wheel = next((base / "dist").glob("pounding_cosim-*.whl"))
-    # pip of this environment installs into the new one (``pip --python``, pip >= 22.3): seeding
-    # the new environment with its own pip costs ~3 s, and byte-compiling every installed module
-    # (numpy, scipy, matplotlib) ~5 s; nothing here uses either (imports compile what they load,
-    # and ``listing`` ignores __pycache__)
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(base / "venv")], check=True)
-    python = base / "venv" / "bin" / "python"
-    install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-compile",
-                              str(wheel)], capture_output=True, text=True)
-    assert install.returncode == 0, install.stderr[-2000:]
-    return python, base
+    # (``listing`` ignores __pycache__: the environment is installed without byte-compiling)
+    return make_venv(base / "venv", [str(wheel)]), base
 
 
 def test_the_installed_command_runs_the_default_scene_like_the_checkout(installed, tmp_path, fmu_dir):
