@@ -1208,7 +1208,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     if inelastic:
                         covered, mask = self._shear_covered(state)
                         if not covered:
-                            self._track_shear(state, cfg, y, z1, rem, drift_reach=bound[n:2 * n], storeys=~mask)
+                            self._track_shear(state, cfg, y, z1, rem, drift_reach=bound[n:2 * n],
+                                              storeys=[not m for m in mask.tolist()])
                     self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
             scan = Scan(cfg, scan_vector, ag1, rem)
@@ -1358,25 +1359,22 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         storey's at an end or at an interior extremum of its drift: where a rigorous bound of
         ``|V|`` over the segment (``drift_reach``, tier 1's bound of the drift's change, or the
         cubic Hermite bound of ``scan``'s drift rows) exceeds the peak, the exact solution is
-        searched (:func:`max_abs` on ``c' z + offset``); only in ``storeys`` (a mask; all if
-        None: the others are covered, :meth:`_shear_covered`).  The start was counted by the
-        segment before (or the initial state)."""
+        searched (:func:`max_abs` on ``c' z + offset``); only in ``storeys`` (a list of bools; all
+        if None: the others are covered, :meth:`_shear_covered`).  ``drift_reach``: a list of
+        floats per storey.  The start was counted by the segment before (or the initial state)."""
         n = self.n
         # on Python floats: the storeys asked are few (those whose drift tier 1 did not clear)
         # (a storey that has not yielded is not tracked: peak_storey_shear)
         if storeys is None:
             which = state.yielded.nonzero()[0].tolist()
-        elif type(storeys) is list:     # (_interval's flags)
-            which = [i for i, (a, b) in enumerate(zip(storeys, state.yielded.tolist())) if a and b]
         else:
-            which = (storeys & state.yielded).nonzero()[0].tolist()
+            which = [i for i, (a, b) in enumerate(zip(storeys, state.yielded.tolist())) if a and b]
         if not which:
             return
         u1, u0 = z1[:n].tolist(), y[:n].tolist()
         mode, slip = state.mode.tolist(), state.slip.tolist()
         k, hard, soft, qy = self._k_list, self._hard_list, self._soft_list, self._qy_list
         peak = state.peak_shear.tolist()
-        reach_rows = drift_reach if drift_reach is None or type(drift_reach) is list else drift_reach.tolist()
         if scan is not None:
             G, B = scan.G[n:2 * n].tolist(), scan.B[n:2 * n, 0].tolist()      # the drift rows
         w4 = length ** 4 / 384.0
@@ -1393,9 +1391,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             if mode[i]:
                 continue       # yielding: monotonic drift, the peak at an end
             shift = soft[i] * slip[i]                     # V = k d - shift
-            if reach_rows is not None:
+            if drift_reach is not None:
                 d0 = u0[i] - u0[i - 1] if i else u0[0]
-                if abs(k[i] * d0 - shift) + k[i] * reach_rows[i] <= peak[i]:
+                if abs(k[i] * d0 - shift) + k[i] * drift_reach[i] <= peak[i]:
                     continue
             if scan is not None:
                 # the Hermite test (as in _peaks): the drift's range and its error bound
@@ -1454,7 +1452,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                     L = float(lengths[j])
                     scan = Scan(cfg, cfg.segment_map(L).scan @ y, float(y[2 * n + 1]), L)
                     end = Y[j + 1] if j + 1 < count else z_end
-                    self._track_shear(state, cfg, y, end, L, scan=scan, storeys=storeys)
+                    self._track_shear(state, cfg, y, end, L, scan=scan, storeys=storeys.tolist())
                 return
         state.peak_shear = peak
 
