@@ -484,8 +484,11 @@ class Configuration:
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w (the building's, ConfigurationConstants).
         B0, B1 = constants.B0, constants.B1
         self.B0, self.B1 = B0, B1
-        self.WB0 = self.W @ B0
-        self.WB1 = self.W @ B1
+        # both modal forcing maps stacked (one product gives beta0 and beta1, :meth:`modal`: a
+        # matrix-vector product's rows are the same dot products whatever rows are stacked), with
+        # each as a view
+        self.WB = np.vstack((self.W @ B0, self.W @ B1))
+        self.WB0, self.WB1 = self.WB[:2 * n], self.WB[2 * n:]
         self.ramp_abs = np.abs(self.WB1[:, 1])      # |modal b1| per unit ground-acceleration slope
         # Functionals whose peaks are tracked: floor displacement, storey drift, absolute
         # acceleration a = M^-1 (p - C v - Kt u) (its constant part p/m added by the caller).
@@ -522,7 +525,9 @@ class Configuration:
 
     def modal(self, z0: np.ndarray, w: np.ndarray):
         """Modal coordinates of a segment start: ``q0, beta0, beta1``."""
-        return self.W @ z0, self.WB0 @ w, self.WB1 @ w
+        beta = self.WB @ w
+        n2 = 2 * self.n
+        return self.W @ z0, beta[:n2], beta[n2:]
 
     def modal_at(self, q0, beta0, beta1, s):
         """``q(s)`` (complex, shape ``(2n,) + shape(s)``) for segment time(s) s."""
@@ -795,21 +800,36 @@ class Scan:
 
     def __init__(self, cfg: "Configuration", vector: np.ndarray, ag_slope: float, length: float):
         # (the configuration's sizes and column views, made once: a Scan is made per segment)
-        m6, re_end, lam34, lam23 = cfg.scan_parts
+        m6, re_end, _, _ = cfg.scan_parts
         self.G = vector[:m6].reshape(6, -1).T
-        re = vector[m6:re_end]
-        im = vector[re_end:]
-        amp = np.sqrt(re * re + im * im)
-        if ag_slope != 0.0:
-            ramp = abs(ag_slope) * cfg.ramp_abs
-            amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-            # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
-            powers = lam34 * amp[:, None] + lam23 * ramp[:, None]
-        else:
-            if cfg.growth_rate:
-                amp = amp * math.exp(cfg.growth_rate * length)
-            powers = lam34 * amp[:, None]
-        self.B = cfg.peak_modal_abs @ powers
+        self.B = _scan_bounds(cfg, vector[m6:re_end], vector[re_end:], ag_slope, length)
+
+    @classmethod
+    def of_parts(cls, cfg: "Configuration", G: np.ndarray, rate0: np.ndarray, ag_slope: float,
+                 length: float) -> "Scan":
+        """The Scan of ``G`` (3n x 6, the columns above) and ``rate0 = W z'(0)`` (complex): what
+        the vector ``[G' (rows in order); Re rate0; Im rate0]`` gives, without assembling it and
+        taking it apart again (:class:`TaylorScan`'s segments)."""
+        scan = object.__new__(cls)
+        scan.G = G
+        scan.B = _scan_bounds(cfg, rate0.real, rate0.imag, ag_slope, length)
+        return scan
+
+
+def _scan_bounds(cfg: "Configuration", re: np.ndarray, im: np.ndarray, ag_slope: float, length: float) -> np.ndarray:
+    """:attr:`Scan.B` from the real and imaginary parts of ``W z'(0)``."""
+    _, _, lam34, lam23 = cfg.scan_parts
+    amp = np.sqrt(re * re + im * im)
+    if ag_slope != 0.0:
+        ramp = abs(ag_slope) * cfg.ramp_abs
+        amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
+        # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
+        powers = lam34 * amp[:, None] + lam23 * ramp[:, None]
+    else:
+        if cfg.growth_rate:
+            amp = amp * math.exp(cfg.growth_rate * length)
+        powers = lam34 * amp[:, None]
+    return cfg.peak_modal_abs @ powers
 
 
 class ModalSegment:
@@ -908,7 +928,7 @@ class TaylorScan:
     :meth:`TaylorSegment.energies` compute, the same sums in another order: round-off apart).
     What an ad hoc segment of a yielding building needs (``ExactPiecewiseLinear._interval``)."""
 
-    __slots__ = ("cfg", "Z", "F", "wd", "degree")
+    __slots__ = ("cfg", "Z", "F", "rate0", "degree")
 
     def __init__(self, segment: "TaylorSegment"):
         cfg = segment.cfg
@@ -918,16 +938,27 @@ class TaylorScan:
         self.cfg, self.degree = cfg, columns.shape[1] - 1
         self.Z = coefficients[:2 * n]               # z(s) = Z @ [s^k]
         self.F = coefficients[2 * n:]               # the tracked functions' coefficients (3n rows)
-        dq0 = columns[:, 1]                          # W z'(0)
-        self.wd = np.concatenate((dq0.real, dq0.imag))
+        self.rate0 = columns[:, 1]                   # W z'(0)
 
     @staticmethod
     def fits(cfg: "Configuration", length: float) -> bool:
         """Whether a segment of ``length`` s is short enough (:class:`TaylorSegment`'s polynomials)."""
         return cfg.rate * length <= TAYLOR_MAX_SPAN
 
+    @property
+    def wd(self) -> np.ndarray:
+        """``[Re W z'(0); Im W z'(0)]``: the scan vector's last block."""
+        return np.concatenate((self.rate0.real, self.rate0.imag))
+
     def state_and_scan(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """``(z(s), the scan vector of [0, s])``: what :meth:`Configuration.scan_vector` gives."""
+        z, G = self.state_and_values(s)
+        return z, np.concatenate((G.T.ravel(), self.wd))
+
+    def state_and_values(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(z(s), G)``: the state and the tracked functions' values, slopes and curvatures at
+        both ends of ``[0, s]`` (3n x 6, :attr:`Scan.G`'s columns): :meth:`state_and_scan`'s
+        numbers, for :meth:`Scan.of_parts`."""
         K = self.degree
         powers = np.full(K + 1, s).cumprod()         # (the method: np.cumprod's wrapper costs as much)
         powers[1:] = powers[:-1]
@@ -940,8 +971,7 @@ class TaylorScan:
         P[1:, 3] = _DEGREES[1:K + 1] * powers[:-1]
         P[2, 4] = 2.0
         P[2:, 5] = _DEGREES2[2:K + 1] * powers[:-2]
-        G = self.F @ P                              # (3n, 6)
-        return self.Z @ powers, np.concatenate((G.T.ravel(), self.wd))
+        return self.Z @ powers, self.F @ P          # (3n, 6)
 
     def energies(self, w: np.ndarray, length: float):
         """:meth:`Configuration.energies` over ``[0, length]`` from the velocity coefficients."""
