@@ -1625,7 +1625,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 g1[2 * n + i] += offset
             raised = [b if b > a or b != b else a for a, b in zip(state.peaks.tolist(), map(abs, g1))]
             new = np.array(raised)
-            limits = [a + b for a, b in zip(raised, self._peak_atol_list)]
+            limits = None       # raised + PEAK_ATOL, added below for the few functions that need it
         # Drop at once the functions that the Hermite test below provably drops: on [0, 1] a
         # cubic Hermite through end values g0, g1 and slopes d0, d1 stays within max(|g0|, |g1|)
         # + 4/27 (|d0| + |d1|) (its basis: h00 + h01 = 1, both in [0, 1]; |h10|, |h11| <= 4/27),
@@ -1672,30 +1672,31 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if prefilter:
             ends, limit_list = g1.tolist(), limits.tolist()
         else:
-            ends, limit_list = g1, limits
+            ends, limit_list = g1, None
         offsets = accel_offset.tolist()
+        atol = self._peak_atol_list
+        gain, margin = _HERMITE_SLOPE_GAIN, _HERMITE_MARGIN
         deferred = []
         for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, rows, bounds):
-            end, limit = ends[j], limit_list[j]
-            if j >= 2 * n:
-                g0 = g0 + offsets[j - 2 * n]
-            else:
-                g0 = g0 + 0.0
             if s0 * s1 > 0.0:
                 # a slope that provably keeps its sign puts the extremes at the ends: first the
                 # bound of the slope's Hermite (as the prefilter's above, with its round-off
                 # margin: where it decides, the exact test decides the same), then the test
+                # (min(a0, a1) written out: the same float, without a call)
                 err = bound1 * w4
                 a0, a1 = abs(s0), abs(s1)
                 e = length * (abs(c0) + abs(c1))
-                if min(a0, a1) - _HERMITE_SLOPE_GAIN * e - _HERMITE_MARGIN * (a0 + a1 + e) - err > 0.0:
+                if (a0 if a0 <= a1 else a1) - gain * e - margin * (a0 + a1 + e) - err > 0.0:
                     continue
                 lo, hi = hermite_range_scalar(s0, s1, length * c0, length * c1)
                 if lo - err > 0.0 or hi + err < 0.0:
                     continue
-            lo, hi = hermite_range_scalar(g0, end, length * s0, length * s1)
+            # (the start value as the array path forms it: the acceleration's constant part added,
+            # 0.0 added to the others)
+            g0 = g0 + offsets[j - 2 * n] if j >= 2 * n else g0 + 0.0
+            lo, hi = hermite_range_scalar(g0, ends[j], length * s0, length * s1)
             reach = max(-lo, hi) + bound0 * w4
-            if reach <= limit:
+            if reach <= (raised[j] + atol[j] if limit_list is None else limit_list[j]):
                 continue
             # a new peak is possible in this segment: keep it for a search when the peaks are
             # read (most are superseded by a later, higher peak before anyone reads them)

@@ -509,6 +509,7 @@ class Configuration:
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
         self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
+        self._span_powers: dict[float, tuple] = {}      # taylor_powers_of_span by span
         # modal rows of the event functions searched in this configuration, by (storey, kind,
         # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event), with their
         # magnitudes: (row, |row|), at most 3n
@@ -693,6 +694,17 @@ class Configuration:
                 full = self._taylor_powers[highest] = _taylor_powers(self.lam, highest)
             P1, P2, k, _ = full
             powers = self._taylor_powers[degree] = (P1[:, :degree - 1], P2[:, :degree - 1], k[:degree - 1], degree)
+        return powers
+
+    def taylor_powers_of_span(self, rho: float) -> tuple:
+        """:meth:`taylor_powers` of :func:`_taylor_degree` ``(rho)``, remembered by ``rho`` (a
+        yielding building's ad hoc segments mostly span a whole knot interval: a few spans
+        recur; at most ``4 max_maps`` kept)."""
+        powers = self._span_powers.get(rho)
+        if powers is None:
+            if len(self._span_powers) >= 4 * self.max_maps:
+                self._span_powers.clear()
+            powers = self._span_powers[rho] = self.taylor_powers(_taylor_degree(rho))
         return powers
 
     def state_and_peak_modal(self) -> np.ndarray:
@@ -1023,8 +1035,7 @@ class TaylorSegment(ModalSegment):
             rho = self.cfg.rate * self.length
             if rho > TAYLOR_MAX_SPAN:
                 return None
-            self._taylor = _taylor_columns(self.cfg.taylor_powers(_taylor_degree(rho)), self.q0, self._dq0,
-                                          self.beta1)
+            self._taylor = _taylor_columns(self.cfg.taylor_powers_of_span(rho), self.q0, self._dq0, self.beta1)
         return self._taylor
 
     def evaluator(self, c_modal: np.ndarray, count: int):
