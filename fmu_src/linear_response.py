@@ -364,7 +364,7 @@ class ConfigurationConstants:
     pattern builds only what depends on its stiffness; the arrays are read, never written."""
 
     __slots__ = ("n", "masses", "C", "damping_rows", "B0", "B1", "drift_rows", "peak_rows", "watch_rows",
-                 "geev", "geev_workspace")
+                 "geev", "geev_workspace", "taylor_grids")
 
     def __init__(self, masses, damping_matrix):
         m = np.asarray(masses, dtype=float)
@@ -393,6 +393,9 @@ class ConfigurationConstants:
         watch[3 * n:, n:] = D
         self.watch_rows = watch
         self.geev = self.geev_workspace = None
+        # TaylorScan's evaluation grids by (degree, span): the same for every configuration
+        # (written by Configuration.taylor_grid only)
+        self.taylor_grids: dict[tuple, tuple] = {}
         if _compute_lwork is not None and n:
             geev, geev_lwork = get_lapack_funcs(("geev", "geev_lwork"), (np.zeros((2 * n, 2 * n)),))
             if geev.typecode == "d":
@@ -509,7 +512,7 @@ class Configuration:
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
         self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
-        self._span_powers: dict[float, tuple] = {}      # taylor_powers_of_span by span
+        self._taylor_grids = constants.taylor_grids     # taylor_grid's (the building's)
         # modal rows of the event functions searched in this configuration, by (storey, kind,
         # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event), with their
         # magnitudes: (row, |row|), at most 3n
@@ -696,16 +699,30 @@ class Configuration:
             powers = self._taylor_powers[degree] = (P1[:, :degree - 1], P2[:, :degree - 1], k[:degree - 1], degree)
         return powers
 
-    def taylor_powers_of_span(self, rho: float) -> tuple:
-        """:meth:`taylor_powers` of :func:`_taylor_degree` ``(rho)``, remembered by ``rho`` (a
-        yielding building's ad hoc segments mostly span a whole knot interval: a few spans
-        recur; at most ``4 max_maps`` kept)."""
-        powers = self._span_powers.get(rho)
-        if powers is None:
-            if len(self._span_powers) >= 4 * self.max_maps:
-                self._span_powers.clear()
-            powers = self._span_powers[rho] = self.taylor_powers(_taylor_degree(rho))
-        return powers
+    def taylor_grid(self, degree: int, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(powers, P)`` of :meth:`TaylorScan.state_and_values` at ``s``: ``powers[k] = s^k``
+        (k = 0 .. degree) and ``P`` (degree + 1 x 6) the value, slope and curvature of every
+        power at 0 and at s as columns.  Remembered by ``(degree, s)`` for the building (a
+        yielding building's ad hoc segments mostly span a whole knot interval); read, never
+        written.  At most ``4 max_maps`` kept."""
+        key = (degree, s)
+        grid = self._taylor_grids.get(key)
+        if grid is None:
+            K = degree
+            powers = np.full(K + 1, s).cumprod()     # (the method: np.cumprod's wrapper costs as much)
+            powers[1:] = powers[:-1]
+            powers[0] = 1.0
+            P = np.zeros((K + 1, 6))
+            P[0, 0] = 1.0
+            P[:, 1] = powers
+            P[1, 2] = 1.0
+            P[1:, 3] = _DEGREES[1:K + 1] * powers[:-1]
+            P[2, 4] = 2.0
+            P[2:, 5] = _DEGREES2[2:K + 1] * powers[:-2]
+            if len(self._taylor_grids) >= 4 * self.max_maps:
+                self._taylor_grids.clear()
+            grid = self._taylor_grids[key] = (powers, P)
+        return grid
 
     def state_and_peak_modal(self) -> np.ndarray:
         """``[V; peak_rows V]`` (5n x 2n, complex): the state and the tracked functions from modal
@@ -971,18 +988,7 @@ class TaylorScan:
         """``(z(s), G)``: the state and the tracked functions' values, slopes and curvatures at
         both ends of ``[0, s]`` (3n x 6, :attr:`Scan.G`'s columns): :meth:`state_and_scan`'s
         numbers, for :meth:`Scan.of_parts`."""
-        K = self.degree
-        powers = np.full(K + 1, s).cumprod()         # (the method: np.cumprod's wrapper costs as much)
-        powers[1:] = powers[:-1]
-        powers[0] = 1.0
-        # the value, slope and curvature of every power at 0 and at s, as columns
-        P = np.zeros((K + 1, 6))
-        P[0, 0] = 1.0
-        P[:, 1] = powers
-        P[1, 2] = 1.0
-        P[1:, 3] = _DEGREES[1:K + 1] * powers[:-1]
-        P[2, 4] = 2.0
-        P[2:, 5] = _DEGREES2[2:K + 1] * powers[:-2]
+        powers, P = self.cfg.taylor_grid(self.degree, s)
         return self.Z @ powers, self.F @ P          # (3n, 6)
 
     def energies(self, w: np.ndarray, length: float):
@@ -1035,7 +1041,8 @@ class TaylorSegment(ModalSegment):
             rho = self.cfg.rate * self.length
             if rho > TAYLOR_MAX_SPAN:
                 return None
-            self._taylor = _taylor_columns(self.cfg.taylor_powers_of_span(rho), self.q0, self._dq0, self.beta1)
+            self._taylor = _taylor_columns(self.cfg.taylor_powers(_taylor_degree(rho)), self.q0, self._dq0,
+                                          self.beta1)
         return self._taylor
 
     def evaluator(self, c_modal: np.ndarray, count: int):
