@@ -1023,7 +1023,7 @@ class TaylorSegment(ModalSegment):
     (``ExactPiecewiseLinear.resolve_peaks``) and by a yielding building's event searches.
     """
 
-    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds")
+    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds", "_coefficients", "_abs3")
 
     def __init__(self, cfg: Configuration, z0: np.ndarray, w: np.ndarray, length: float):
         super().__init__(cfg, z0, w)
@@ -1034,6 +1034,8 @@ class TaylorSegment(ModalSegment):
         self._amp0 = self._ramp = None      # |q'(0)|, |beta1|: made at the first bound (_bound_parts)
         self._taylor = None                 # the columns, made at their first use
         self._bounds = {}                   # see _bound_parts
+        self._coefficients = None           # (c_modal, its Taylor coefficients) last asked
+        self._abs3 = None                   # |q(0)|, |q'(0)|, |q''(0)| / 2 as columns (start_values)
 
     def taylor(self) -> np.ndarray | None:
         """``(2n, K + 1)``: column k is ``q^(k)(0) / k!``; None for a long segment."""
@@ -1045,11 +1047,35 @@ class TaylorSegment(ModalSegment):
                                           self.beta1)
         return self._taylor
 
+    def _taylor_coefficients(self, c_modal: np.ndarray) -> list[float]:
+        """``Re(c' q^(k)(0)) / k!``, k = 0 .. K: the Taylor coefficients of ``g = c' z`` at 0
+        (the columns must exist), remembered for the array last asked (start_values, then
+        evaluator, for one search)."""
+        hit = self._coefficients
+        if hit is None or hit[0] is not c_modal:
+            hit = self._coefficients = (c_modal, (c_modal @ self._taylor).real.tolist())
+        return hit[1]
+
+    def start_values(self, c_modal: np.ndarray, c_modal_abs: np.ndarray) -> tuple[list[float], list[float]]:
+        """:meth:`ModalSegment.start_values` with the slope and curvature from the Taylor
+        coefficients (``g'(0) = a_1``, ``g''(0) = 2 a_2``) and the magnitudes from the first three
+        columns (``|q''(0)| = 2 |q''(0) / 2|``) in one product: the value at 0 (which a search
+        at its limit shifts its offset by) as the modal form computes it; the others decide
+        only (round-off tolerances, exclusion bounds), to round-off."""
+        columns = self.taylor()
+        if columns is None:
+            return super().start_values(c_modal, c_modal_abs)
+        a = self._taylor_coefficients(c_modal)
+        if self._abs3 is None:
+            self._abs3 = np.abs(columns[:, :3])
+        m0, m1, m2 = (c_modal_abs @ self._abs3).tolist()
+        return [float((c_modal @ self.q0).real), a[1], 2.0 * a[2]], [m0, m1, 2.0 * m2]
+
     def evaluator(self, c_modal: np.ndarray, count: int):
         columns = self.taylor() if count <= _TAYLOR_DERIVATIVES + 1 else None
         if columns is None:
             return super().evaluator(c_modal, count)
-        a = (c_modal @ columns).real.tolist()           # Taylor coefficients of g at 0
+        a = self._taylor_coefficients(c_modal)          # Taylor coefficients of g at 0
         if count == 3:
             # what the searches ask: g, g', g'' in one Horner pass (value, slope, half curvature)
             highest_first = a[::-1]
@@ -1135,9 +1161,9 @@ class TaylorSegment(ModalSegment):
                 self._ramp = np.abs(self.beta1)
             powers = self.cfg.lam_powers
             weights = c_modal_abs
-            amp0 = weights @ (powers * self._amp0[:, None])
-            ramp = weights @ (powers * self._ramp[:, None])
-            parts = {k: (float(amp0[k - 1]), float(ramp[k - 1]), float(ramp[k - 2])) for k in range(2, 6)}
+            amp0 = (weights @ (powers * self._amp0[:, None])).tolist()
+            ramp = (weights @ (powers * self._ramp[:, None])).tolist()
+            parts = {k: (amp0[k - 1], ramp[k - 1], ramp[k - 2]) for k in range(2, 6)}
             hit = self._bounds[key] = (c_modal_abs, parts)
         return hit[1]
 
