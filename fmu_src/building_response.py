@@ -889,12 +889,15 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         G = scans[:, :6 * m].reshape(count, 6, m)            # rows: g(0), g(L), g'(0), g'(L), g''(0), g''(L)
         re = scans[:, 6 * m:6 * m + two_n]
         im = scans[:, 6 * m + two_n:]
-        # Scan's bounds (see there), every interval at once
-        amp = np.sqrt(re * re + im * im)
-        ramp = np.abs(Y[:, two_n + 1])[:, None] * cfg.ramp_abs
-        amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-        bound4 = (cfg.lam3 * amp + cfg.lam2 * ramp) @ cfg.peak_modal_abs.T
-        bound5 = (cfg.lam4 * amp + cfg.lam3 * ramp) @ cfg.peak_modal_abs.T
+        # Scan's bounds (linear_response._scan_bounds), every interval at once: the same elements
+        # (the same operations on each; x + 0 and x * 1 are x, where that skips them)
+        a = np.abs(Y[:, two_n + 1])[:, None]
+        amp = np.hypot(re, im) + (length * a) * cfg.ramp_abs
+        if cfg.growth_rate:
+            amp = amp * math.exp(cfg.growth_rate * length)
+        ramp23 = cfg.scan_parts[3]
+        bound4 = (cfg.lam3 * amp + a * ramp23[:, 0]) @ cfg.peak_modal_abs.T
+        bound5 = (cfg.lam4 * amp + a * ramp23[:, 1]) @ cfg.peak_modal_abs.T
         accel_offset = p * self._inv_m
         offset = np.zeros(m)
         offset[two_n:] = accel_offset

@@ -479,9 +479,6 @@ class Configuration:
         powers[:, 3] = self.lam3
         powers[:, 4] = self.lam4
         self.lam_powers = powers
-        # Scan's: where its vector's blocks end (6 blocks of the 3n tracked functions, then Re W z'(0))
-        # and the columns |lam|^3..4 and |lam|^2..3 (views)
-        self.scan_parts = (18 * n, 20 * n, powers[:, 3:5], powers[:, 2:4])
         self.rate = max(self.lam_abs.tolist()) if n else 0.0
         self.growth_rate = max(0.0, max(lam.real.tolist()))   # > 0 only by round-off
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w (the building's, ConfigurationConstants).
@@ -493,6 +490,9 @@ class Configuration:
         self.WB = np.vstack((self.W @ B0, self.W @ B1))
         self.WB0, self.WB1 = self.WB[:2 * n], self.WB[2 * n:]
         self.ramp_abs = np.abs(self.WB1[:, 1])      # |modal b1| per unit ground-acceleration slope
+        # Scan's (_scan_bounds): where its vector's blocks end (6 blocks of the 3n tracked functions,
+        # then Re W z'(0)), the columns |lam|^3..4 (a view) and |lam|^2..3 |W b1|
+        self.scan_parts = (18 * n, 20 * n, powers[:, 3:5], powers[:, 2:4] * self.ramp_abs[:, None])
         # Functionals whose peaks are tracked: floor displacement, storey drift, absolute
         # acceleration a = M^-1 (p - C v - Kt u) (its constant part p/m added by the caller).
         F = constants.peak_rows.copy()
@@ -846,18 +846,23 @@ class Scan:
 
 
 def _scan_bounds(cfg: "Configuration", re: np.ndarray, im: np.ndarray, ag_slope: float, length: float) -> np.ndarray:
-    """:attr:`Scan.B` from the real and imaginary parts of ``W z'(0)``."""
-    _, _, lam34, lam23 = cfg.scan_parts
-    amp = np.sqrt(re * re + im * im)
-    if ag_slope != 0.0:
-        ramp = abs(ag_slope) * cfg.ramp_abs
-        amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-        # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
-        powers = lam34 * amp[:, None] + lam23 * ramp[:, None]
-    else:
-        if cfg.growth_rate:
-            amp = amp * math.exp(cfg.growth_rate * length)
-        powers = lam34 * amp[:, None]
+    """:attr:`Scan.B` from the real and imaginary parts of ``W z'(0)``: ``|F V| @ powers`` with
+    the columns ``|lam|^3 amp + |lam|^2 ramp`` and ``|lam|^4 amp + |lam|^3 ramp``, ``ramp =
+    |ag1| |W b1|`` and ``amp = (|W z'(0)| + L ramp) e^{max(Re lam, 0) L}``
+    (:meth:`Configuration.derivative_bound`).  The ramp terms as ``|ag1|`` times the
+    configuration's ``|lam|^2..3 |W b1|`` (:attr:`Configuration.scan_parts`): fewer numpy calls
+    per segment; ``ExactPiecewiseLinear._interval_peaks`` forms the same elements for many
+    intervals at once (so both decide alike).  Bounds: they decide only."""
+    _, _, lam34, ramp23 = cfg.scan_parts
+    a = abs(ag_slope)
+    amp = np.hypot(re, im)
+    if a != 0.0:
+        amp = amp + (length * a) * cfg.ramp_abs
+    if cfg.growth_rate:
+        amp = amp * math.exp(cfg.growth_rate * length)
+    powers = lam34 * amp[:, None]
+    if a != 0.0:
+        powers += a * ramp23
     return cfg.peak_modal_abs @ powers
 
 
