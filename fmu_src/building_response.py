@@ -1606,9 +1606,9 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         """Update the running peaks of |x|, |drift|, |a| over a segment of the exact solution.
 
         The end values are recorded; the functions that tier 1 (``flags``, a list of 3n bools;
-        all if None) could not clear are tested by the cubic Hermite bound and, where a new peak remains possible,
-        the segment is kept in ``state.pending`` for a search when the peaks are read
-        (:meth:`resolve_peaks`): a peak that a later step exceeds is never searched.
+        all if None) could not clear are tested by the cubic Hermite bound and, where a new peak
+        remains possible, the segment is kept in ``state.pending`` for a search when the peaks
+        are read (:meth:`resolve_peaks`): a peak that a later step exceeds is never searched.
         """
         n = self.n
         G, B = scan.G, scan.B
