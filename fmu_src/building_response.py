@@ -263,14 +263,17 @@ def _drift_rows(u: np.ndarray) -> np.ndarray:
     return d
 
 
-def _state_and_scan(segment, poly, z0: np.ndarray, w: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray]:
-    """A segment's state at ``s`` and its :class:`~fmu_src.linear_response.Scan` vector over
-    ``[0, s]``: from its Taylor coefficients (``poly``, a :class:`TaylorScan`) where it has them,
-    else from its exact solution (``segment.state``, :meth:`Configuration.scan_vector`)."""
+def _state_and_scan(segment, poly, z0: np.ndarray, w: np.ndarray, s: float, ag_slope: float) -> tuple[np.ndarray, Scan]:
+    """A segment's state at ``s`` and its :class:`~fmu_src.linear_response.Scan` over ``[0, s]``
+    (``ag_slope``: the ground acceleration's slope, m/s^3): from its Taylor coefficients
+    (``poly``, a :class:`TaylorScan`) where it has them, else from its exact solution
+    (``segment.state``, :meth:`Configuration.scan_vector`)."""
+    cfg = segment.cfg
     if poly is not None:
-        return poly.state_and_scan(s)
+        z1, G = poly.state_and_values(s)
+        return z1, Scan.of_parts(cfg, G, poly.rate0, ag_slope, s)
     z1 = segment.state(s)
-    return z1, segment.cfg.scan_vector(z0, z1, w, s)
+    return z1, Scan(cfg, cfg.scan_vector(z0, z1, w, s), ag_slope, s)
 
 
 def _floor_forces(V: np.ndarray) -> np.ndarray:
@@ -766,7 +769,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 for j, scan_vector, flags, L in each:
                     y = Y[j].copy()
                     scan = Scan(cfg, scan_vector, float(y[two_n + 1]), L)
-                    self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags)
+                    self._peaks(cfg, scan, None, state, y, p, L, xtol, cost, flags.tolist())
         state.E_damping += e_damp
         state.E_input += e_in
         # a covered storey whose |drift| tier 1 kept under its peak in an interval cannot pass its
@@ -886,12 +889,15 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         G = scans[:, :6 * m].reshape(count, 6, m)            # rows: g(0), g(L), g'(0), g'(L), g''(0), g''(L)
         re = scans[:, 6 * m:6 * m + two_n]
         im = scans[:, 6 * m + two_n:]
-        # Scan's bounds (see there), every interval at once
-        amp = np.sqrt(re * re + im * im)
-        ramp = np.abs(Y[:, two_n + 1])[:, None] * cfg.ramp_abs
-        amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-        bound4 = (cfg.lam3 * amp + cfg.lam2 * ramp) @ cfg.peak_modal_abs.T
-        bound5 = (cfg.lam4 * amp + cfg.lam3 * ramp) @ cfg.peak_modal_abs.T
+        # Scan's bounds (linear_response._scan_bounds), every interval at once: the same elements
+        # (the same operations on each; x + 0 and x * 1 are x, where that skips them)
+        a = np.abs(Y[:, two_n + 1])[:, None]
+        amp = np.hypot(re, im) + (length * a) * cfg.ramp_abs
+        if cfg.growth_rate:
+            amp = amp * math.exp(cfg.growth_rate * length)
+        ramp23 = cfg.scan_parts[3]
+        bound4 = (cfg.lam3 * amp + a * ramp23[:, 0]) @ cfg.peak_modal_abs.T
+        bound5 = (cfg.lam4 * amp + a * ramp23[:, 1]) @ cfg.peak_modal_abs.T
         accel_offset = p * self._inv_m
         offset = np.zeros(m)
         offset[two_n:] = accel_offset
@@ -974,7 +980,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             scan = object.__new__(Scan)
             scan.G = G[i].T
             scan.B = B[i]
-            self._peaks(cfg, scan, None, state, Y[i].copy(), p, length, xtol, cost, keep[i])
+            self._peaks(cfg, scan, None, state, Y[i].copy(), p, length, xtol, cost, keep[i].tolist())
         state.peaks = np.maximum(state.peaks, running[-1])
 
     def _batch_plan(self, smap):
@@ -1135,7 +1141,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             y = np.concatenate((state.u, state.v, (ag0 + ag1 * s, ag1), p))
             w = y[2 * n:]
             z0 = y[:2 * n]
-            segment = poly = None
+            segment = poly = scan = None
             e_damp = e_in = None
             change = None
             if s == 0.0 and (not inelastic or self._worth_a_map(cfg, rem, not yielding)):
@@ -1158,7 +1164,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 segment = TaylorSegment(cfg, z0, w, rem)
                 if TaylorScan.fits(cfg, rem):     # the end state and the scan from the Taylor coefficients
                     poly = TaylorScan(segment)
-                z1, scan_vector = _state_and_scan(segment, poly, z0, w, rem)
+                z1, scan = _state_and_scan(segment, poly, z0, w, rem, ag1)
             cost.segments += 1
             # tier 1: how far can every watched function move in this segment?
             peak_flags = unload_flags = up_flags = down_flags = None
@@ -1212,7 +1218,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                                               storeys=[not m for m in mask.tolist()])
                     self._commit(state, z1, force, e_damp, e_in, yielding)
                     return events
-            scan = Scan(cfg, scan_vector, ag1, rem)
+            if scan is None:        # (the ad hoc path made it with the end state)
+                scan = Scan(cfg, scan_vector, ag1, rem)
             event = None
             if inelastic and not quiet:     # a quiet segment only raises peaks: no event to look for
                 segment, event = self._first_event(cfg, scan, state, y, rem, xtol, cost, up_flags, down_flags,
@@ -1223,8 +1230,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 if stop > 0.0:
                     if poly is None and TaylorScan.fits(cfg, rem):
                         poly = TaylorScan(segment)
-                    z1, scan_vector = _state_and_scan(segment, poly, z0, w, stop)
-                    scan = Scan(cfg, scan_vector, ag1, stop)
+                    z1, scan = _state_and_scan(segment, poly, z0, w, stop, ag1)
                 e_damp = None
             if stop > 0.0:
                 if e_damp is None:
@@ -1599,16 +1605,16 @@ class ExactPiecewiseLinear(BuildingIntegrator):
     def _peaks(self, cfg, scan, segment, state, y, p, length, xtol, cost, flags=None):
         """Update the running peaks of |x|, |drift|, |a| over a segment of the exact solution.
 
-        The end values are recorded; the functions that tier 1 (``flags``; all if None) could
-        not clear are tested by the cubic Hermite bound and, where a new peak remains possible,
-        the segment is kept in ``state.pending`` for a search when the peaks are read
-        (:meth:`resolve_peaks`): a peak that a later step exceeds is never searched.
+        The end values are recorded; the functions that tier 1 (``flags``, a list of 3n bools;
+        all if None) could not clear are tested by the cubic Hermite bound and, where a new peak
+        remains possible, the segment is kept in ``state.pending`` for a search when the peaks
+        are read (:meth:`resolve_peaks`): a peak that a later step exceeds is never searched.
         """
         n = self.n
         G, B = scan.G, scan.B
         w4 = length ** 4 / 384.0
         accel_offset = p * self._inv_m
-        prefilter = 3 * n >= _PREFILTER_FROM and (flags is None or np.count_nonzero(flags) >= _PREFILTER_FROM)
+        prefilter = 3 * n >= _PREFILTER_FROM and (flags is None or flags.count(True) >= _PREFILTER_FROM)
         if prefilter:
             g1 = G[:, 1].copy()
             g1[2 * n:] += accel_offset
@@ -1622,7 +1628,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
                 g1[2 * n + i] += offset
             raised = [b if b > a or b != b else a for a, b in zip(state.peaks.tolist(), map(abs, g1))]
             new = np.array(raised)
-            limits = [a + b for a, b in zip(raised, self._peak_atol_list)]
+            limits = None       # raised + PEAK_ATOL, added below for the few functions that need it
         # Drop at once the functions that the Hermite test below provably drops: on [0, 1] a
         # cubic Hermite through end values g0, g1 and slopes d0, d1 stays within max(|g0|, |g1|)
         # + 4/27 (|d0| + |d1|) (its basis: h00 + h01 = 1, both in [0, 1]; |h10|, |h11| <= 4/27),
@@ -1631,10 +1637,8 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         # being monotonic, a function this bound keeps under its limit fails the test too.
         # (a dozen numpy calls: worth it from about 16 candidates, measured; fewer are tested
         # one by one at once)
-        keep = flags
         if prefilter:
-            if keep is None:
-                keep = np.ones(3 * n, dtype=bool)
+            keep = np.ones(3 * n, dtype=bool) if flags is None else np.array(flags)
             g0v = np.abs(G[:, 0] + self._watch_offset(accel_offset))
             g1v = np.abs(g1)
             s0v, s1v = np.abs(G[:, 2]), np.abs(G[:, 3])
@@ -1649,14 +1653,17 @@ class ExactPiecewiseLinear(BuildingIntegrator):
             monotonic = np.minimum(s0v, s1v) - _HERMITE_SLOPE_GAIN * curvatures - _HERMITE_MARGIN * (
                 s0v + s1v + curvatures) - B[:, 1] * w4 > 0.0
             monotonic &= G[:, 2] * G[:, 3] > 0.0
-            keep = keep & ~(reach <= limits) & ~monotonic
-        if keep is None:
+            keep &= ~(reach <= limits) & ~monotonic
+            candidates = keep.nonzero()[0].tolist()
+        elif flags is None:
+            candidates = None
+        else:
+            candidates = [j for j, f in enumerate(flags) if f]
+        if candidates is None:
             # every function a candidate (no prefilter for a few storeys): all rows, in order
             candidates = self._all_functions
             rows, bounds = G.tolist(), B.tolist()
         else:
-            # (_interval's flags are a list of bools)
-            candidates = [j for j, f in enumerate(keep) if f] if type(keep) is list else keep.nonzero()[0].tolist()
             if not candidates:            # every function cleared: only the end values count
                 state.peaks = new
                 return
@@ -1668,30 +1675,31 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         if prefilter:
             ends, limit_list = g1.tolist(), limits.tolist()
         else:
-            ends, limit_list = g1, limits
+            ends, limit_list = g1, None
         offsets = accel_offset.tolist()
+        atol = self._peak_atol_list
+        gain, margin = _HERMITE_SLOPE_GAIN, _HERMITE_MARGIN
         deferred = []
         for j, (g0, _, s0, s1, c0, c1), (bound0, bound1) in zip(candidates, rows, bounds):
-            end, limit = ends[j], limit_list[j]
-            if j >= 2 * n:
-                g0 = g0 + offsets[j - 2 * n]
-            else:
-                g0 = g0 + 0.0
             if s0 * s1 > 0.0:
                 # a slope that provably keeps its sign puts the extremes at the ends: first the
                 # bound of the slope's Hermite (as the prefilter's above, with its round-off
                 # margin: where it decides, the exact test decides the same), then the test
+                # (min(a0, a1) written out: the same float, without a call)
                 err = bound1 * w4
                 a0, a1 = abs(s0), abs(s1)
                 e = length * (abs(c0) + abs(c1))
-                if min(a0, a1) - _HERMITE_SLOPE_GAIN * e - _HERMITE_MARGIN * (a0 + a1 + e) - err > 0.0:
+                if (a0 if a0 <= a1 else a1) - gain * e - margin * (a0 + a1 + e) - err > 0.0:
                     continue
                 lo, hi = hermite_range_scalar(s0, s1, length * c0, length * c1)
                 if lo - err > 0.0 or hi + err < 0.0:
                     continue
-            lo, hi = hermite_range_scalar(g0, end, length * s0, length * s1)
+            # (the start value as the array path forms it: the acceleration's constant part added,
+            # 0.0 added to the others)
+            g0 = g0 + offsets[j - 2 * n] if j >= 2 * n else g0 + 0.0
+            lo, hi = hermite_range_scalar(g0, ends[j], length * s0, length * s1)
             reach = max(-lo, hi) + bound0 * w4
-            if reach <= limit:
+            if reach <= (raised[j] + atol[j] if limit_list is None else limit_list[j]):
                 continue
             # a new peak is possible in this segment: keep it for a search when the peaks are
             # read (most are superseded by a later, higher peak before anyone reads them)
@@ -1796,7 +1804,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         y[2 * n + 1] = 0.0
         y[2 * n + 2:] = y_zoh[2 * n + 1:]
         scan = Scan(cfg, scan_rows @ y_zoh, 0.0, h)
-        self._peaks(cfg, scan, None, state, y, y[2 * n + 2:], h, EVENT_XTOL * h, cost, flags)
+        self._peaks(cfg, scan, None, state, y, y[2 * n + 2:], h, EVENT_XTOL * h, cost, flags.tolist())
 
 
     # -- a linear building's one-interval step through one matrix (building_slave) ------------
@@ -1834,7 +1842,7 @@ class ExactPiecewiseLinear(BuildingIntegrator):
         flags = plan.reach @ np.abs(w[plan.start:]) > state.peaks        # strict, as _interval
         if flags.any():
             scan = Scan(plan.cfg, plan.smap.scan @ y, ag1, h)
-            self._peaks(plan.cfg, scan, None, state, y, force, h, EVENT_XTOL * h, cost, flags)
+            self._peaks(plan.cfg, scan, None, state, y, force, h, EVENT_XTOL * h, cost, flags.tolist())
         else:
             cost.cleared += 1
         state.E_external += d_ext

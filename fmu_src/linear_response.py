@@ -364,7 +364,7 @@ class ConfigurationConstants:
     pattern builds only what depends on its stiffness; the arrays are read, never written."""
 
     __slots__ = ("n", "masses", "C", "damping_rows", "B0", "B1", "drift_rows", "peak_rows", "watch_rows",
-                 "geev", "geev_workspace")
+                 "geev", "geev_workspace", "taylor_grids")
 
     def __init__(self, masses, damping_matrix):
         m = np.asarray(masses, dtype=float)
@@ -393,6 +393,9 @@ class ConfigurationConstants:
         watch[3 * n:, n:] = D
         self.watch_rows = watch
         self.geev = self.geev_workspace = None
+        # TaylorScan's evaluation grids by (degree, span): the same for every configuration
+        # (written by Configuration.taylor_grid only)
+        self.taylor_grids: dict[tuple, tuple] = {}
         if _compute_lwork is not None and n:
             geev, geev_lwork = get_lapack_funcs(("geev", "geev_lwork"), (np.zeros((2 * n, 2 * n)),))
             if geev.typecode == "d":
@@ -476,17 +479,20 @@ class Configuration:
         powers[:, 3] = self.lam3
         powers[:, 4] = self.lam4
         self.lam_powers = powers
-        # Scan's: where its vector's blocks end (6 blocks of the 3n tracked functions, then Re W z'(0))
-        # and the columns |lam|^3..4 and |lam|^2..3 (views)
-        self.scan_parts = (18 * n, 20 * n, powers[:, 3:5], powers[:, 2:4])
         self.rate = max(self.lam_abs.tolist()) if n else 0.0
         self.growth_rate = max(0.0, max(lam.real.tolist()))   # > 0 only by round-off
         # Forcing w = [ag0, ag1, p]: b0 = B0 w, b1 = B1 w (the building's, ConfigurationConstants).
         B0, B1 = constants.B0, constants.B1
         self.B0, self.B1 = B0, B1
-        self.WB0 = self.W @ B0
-        self.WB1 = self.W @ B1
+        # both modal forcing maps stacked (one product gives beta0 and beta1, :meth:`modal`: a
+        # matrix-vector product's rows are the same dot products whatever rows are stacked), with
+        # each as a view
+        self.WB = np.vstack((self.W @ B0, self.W @ B1))
+        self.WB0, self.WB1 = self.WB[:2 * n], self.WB[2 * n:]
         self.ramp_abs = np.abs(self.WB1[:, 1])      # |modal b1| per unit ground-acceleration slope
+        # Scan's (_scan_bounds): where its vector's blocks end (6 blocks of the 3n tracked functions,
+        # then Re W z'(0)), the columns |lam|^3..4 (a view) and |lam|^2..3 |W b1|
+        self.scan_parts = (18 * n, 20 * n, powers[:, 3:5], powers[:, 2:4] * self.ramp_abs[:, None])
         # Functionals whose peaks are tracked: floor displacement, storey drift, absolute
         # acceleration a = M^-1 (p - C v - Kt u) (its constant part p/m added by the caller).
         F = constants.peak_rows.copy()
@@ -506,6 +512,7 @@ class Configuration:
         self.maps_built = 0          # cost counter
         self.segments_without_map = 0   # segments evaluated ad hoc (see ExactPiecewiseLinear._worth_a_map)
         self._taylor_powers: dict[int, tuple] = {}      # taylor_powers by degree
+        self._taylor_grids = constants.taylor_grids     # taylor_grid's (the building's)
         # modal rows of the event functions searched in this configuration, by (storey, kind,
         # mode) (fmu_src.building_response.ExactPiecewiseLinear._first_event), with their
         # magnitudes: (row, |row|), at most 3n
@@ -522,7 +529,9 @@ class Configuration:
 
     def modal(self, z0: np.ndarray, w: np.ndarray):
         """Modal coordinates of a segment start: ``q0, beta0, beta1``."""
-        return self.W @ z0, self.WB0 @ w, self.WB1 @ w
+        beta = self.WB @ w
+        n2 = 2 * self.n
+        return self.W @ z0, beta[:n2], beta[n2:]
 
     def modal_at(self, q0, beta0, beta1, s):
         """``q(s)`` (complex, shape ``(2n,) + shape(s)``) for segment time(s) s."""
@@ -690,6 +699,31 @@ class Configuration:
             powers = self._taylor_powers[degree] = (P1[:, :degree - 1], P2[:, :degree - 1], k[:degree - 1], degree)
         return powers
 
+    def taylor_grid(self, degree: int, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(powers, P)`` of :meth:`TaylorScan.state_and_values` at ``s``: ``powers[k] = s^k``
+        (k = 0 .. degree) and ``P`` (degree + 1 x 6) the value, slope and curvature of every
+        power at 0 and at s as columns.  Remembered by ``(degree, s)`` for the building (a
+        yielding building's ad hoc segments mostly span a whole knot interval); read, never
+        written.  At most ``4 max_maps`` kept."""
+        key = (degree, s)
+        grid = self._taylor_grids.get(key)
+        if grid is None:
+            K = degree
+            powers = np.full(K + 1, s).cumprod()     # (the method: np.cumprod's wrapper costs as much)
+            powers[1:] = powers[:-1]
+            powers[0] = 1.0
+            P = np.zeros((K + 1, 6))
+            P[0, 0] = 1.0
+            P[:, 1] = powers
+            P[1, 2] = 1.0
+            P[1:, 3] = _DEGREES[1:K + 1] * powers[:-1]
+            P[2, 4] = 2.0
+            P[2:, 5] = _DEGREES2[2:K + 1] * powers[:-2]
+            if len(self._taylor_grids) >= 4 * self.max_maps:
+                self._taylor_grids.clear()
+            grid = self._taylor_grids[key] = (powers, P)
+        return grid
+
     def state_and_peak_modal(self) -> np.ndarray:
         """``[V; peak_rows V]`` (5n x 2n, complex): the state and the tracked functions from modal
         coordinates in one product (:class:`TaylorScan`).  Made once per configuration."""
@@ -795,21 +829,41 @@ class Scan:
 
     def __init__(self, cfg: "Configuration", vector: np.ndarray, ag_slope: float, length: float):
         # (the configuration's sizes and column views, made once: a Scan is made per segment)
-        m6, re_end, lam34, lam23 = cfg.scan_parts
+        m6, re_end, _, _ = cfg.scan_parts
         self.G = vector[:m6].reshape(6, -1).T
-        re = vector[m6:re_end]
-        im = vector[re_end:]
-        amp = np.sqrt(re * re + im * im)
-        if ag_slope != 0.0:
-            ramp = abs(ag_slope) * cfg.ramp_abs
-            amp = (amp + length * ramp) * math.exp(cfg.growth_rate * length)
-            # columns |lam|^3 amp + |lam|^2 ramp and |lam|^4 amp + |lam|^3 ramp
-            powers = lam34 * amp[:, None] + lam23 * ramp[:, None]
-        else:
-            if cfg.growth_rate:
-                amp = amp * math.exp(cfg.growth_rate * length)
-            powers = lam34 * amp[:, None]
-        self.B = cfg.peak_modal_abs @ powers
+        self.B = _scan_bounds(cfg, vector[m6:re_end], vector[re_end:], ag_slope, length)
+
+    @classmethod
+    def of_parts(cls, cfg: "Configuration", G: np.ndarray, rate0: np.ndarray, ag_slope: float,
+                 length: float) -> "Scan":
+        """The Scan of ``G`` (3n x 6, the columns above) and ``rate0 = W z'(0)`` (complex): what
+        the vector ``[G' (rows in order); Re rate0; Im rate0]`` gives, without assembling it and
+        taking it apart again (:class:`TaylorScan`'s segments)."""
+        scan = object.__new__(cls)
+        scan.G = G
+        scan.B = _scan_bounds(cfg, rate0.real, rate0.imag, ag_slope, length)
+        return scan
+
+
+def _scan_bounds(cfg: "Configuration", re: np.ndarray, im: np.ndarray, ag_slope: float, length: float) -> np.ndarray:
+    """:attr:`Scan.B` from the real and imaginary parts of ``W z'(0)``: ``|F V| @ powers`` with
+    the columns ``|lam|^3 amp + |lam|^2 ramp`` and ``|lam|^4 amp + |lam|^3 ramp``, ``ramp =
+    |ag1| |W b1|`` and ``amp = (|W z'(0)| + L ramp) e^{max(Re lam, 0) L}``
+    (:meth:`Configuration.derivative_bound`).  The ramp terms as ``|ag1|`` times the
+    configuration's ``|lam|^2..3 |W b1|`` (:attr:`Configuration.scan_parts`): fewer numpy calls
+    per segment; ``ExactPiecewiseLinear._interval_peaks`` forms the same elements for many
+    intervals at once (so both decide alike).  Bounds: they decide only."""
+    _, _, lam34, ramp23 = cfg.scan_parts
+    a = abs(ag_slope)
+    amp = np.hypot(re, im)
+    if a != 0.0:
+        amp = amp + (length * a) * cfg.ramp_abs
+    if cfg.growth_rate:
+        amp = amp * math.exp(cfg.growth_rate * length)
+    powers = lam34 * amp[:, None]
+    if a != 0.0:
+        powers += a * ramp23
+    return cfg.peak_modal_abs @ powers
 
 
 class ModalSegment:
@@ -908,7 +962,7 @@ class TaylorScan:
     :meth:`TaylorSegment.energies` compute, the same sums in another order: round-off apart).
     What an ad hoc segment of a yielding building needs (``ExactPiecewiseLinear._interval``)."""
 
-    __slots__ = ("cfg", "Z", "F", "wd", "degree")
+    __slots__ = ("cfg", "Z", "F", "rate0", "degree")
 
     def __init__(self, segment: "TaylorSegment"):
         cfg = segment.cfg
@@ -918,30 +972,29 @@ class TaylorScan:
         self.cfg, self.degree = cfg, columns.shape[1] - 1
         self.Z = coefficients[:2 * n]               # z(s) = Z @ [s^k]
         self.F = coefficients[2 * n:]               # the tracked functions' coefficients (3n rows)
-        dq0 = columns[:, 1]                          # W z'(0)
-        self.wd = np.concatenate((dq0.real, dq0.imag))
+        self.rate0 = columns[:, 1]                   # W z'(0)
 
     @staticmethod
     def fits(cfg: "Configuration", length: float) -> bool:
         """Whether a segment of ``length`` s is short enough (:class:`TaylorSegment`'s polynomials)."""
         return cfg.rate * length <= TAYLOR_MAX_SPAN
 
+    @property
+    def wd(self) -> np.ndarray:
+        """``[Re W z'(0); Im W z'(0)]``: the scan vector's last block."""
+        return np.concatenate((self.rate0.real, self.rate0.imag))
+
     def state_and_scan(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """``(z(s), the scan vector of [0, s])``: what :meth:`Configuration.scan_vector` gives."""
-        K = self.degree
-        powers = np.full(K + 1, s).cumprod()         # (the method: np.cumprod's wrapper costs as much)
-        powers[1:] = powers[:-1]
-        powers[0] = 1.0
-        # the value, slope and curvature of every power at 0 and at s, as columns
-        P = np.zeros((K + 1, 6))
-        P[0, 0] = 1.0
-        P[:, 1] = powers
-        P[1, 2] = 1.0
-        P[1:, 3] = _DEGREES[1:K + 1] * powers[:-1]
-        P[2, 4] = 2.0
-        P[2:, 5] = _DEGREES2[2:K + 1] * powers[:-2]
-        G = self.F @ P                              # (3n, 6)
-        return self.Z @ powers, np.concatenate((G.T.ravel(), self.wd))
+        z, G = self.state_and_values(s)
+        return z, np.concatenate((G.T.ravel(), self.wd))
+
+    def state_and_values(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(z(s), G)``: the state and the tracked functions' values, slopes and curvatures at
+        both ends of ``[0, s]`` (3n x 6, :attr:`Scan.G`'s columns): :meth:`state_and_scan`'s
+        numbers, for :meth:`Scan.of_parts`."""
+        powers, P = self.cfg.taylor_grid(self.degree, s)
+        return self.Z @ powers, self.F @ P          # (3n, 6)
 
     def energies(self, w: np.ndarray, length: float):
         """:meth:`Configuration.energies` over ``[0, length]`` from the velocity coefficients."""
@@ -975,7 +1028,7 @@ class TaylorSegment(ModalSegment):
     (``ExactPiecewiseLinear.resolve_peaks``) and by a yielding building's event searches.
     """
 
-    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds")
+    __slots__ = ("length", "_taylor", "_amp0", "_ramp", "_dq0", "_bounds", "_coefficients", "_abs3")
 
     def __init__(self, cfg: Configuration, z0: np.ndarray, w: np.ndarray, length: float):
         super().__init__(cfg, z0, w)
@@ -986,6 +1039,8 @@ class TaylorSegment(ModalSegment):
         self._amp0 = self._ramp = None      # |q'(0)|, |beta1|: made at the first bound (_bound_parts)
         self._taylor = None                 # the columns, made at their first use
         self._bounds = {}                   # see _bound_parts
+        self._coefficients = None           # (c_modal, its Taylor coefficients) last asked
+        self._abs3 = None                   # |q(0)|, |q'(0)|, |q''(0)| / 2 as columns (start_values)
 
     def taylor(self) -> np.ndarray | None:
         """``(2n, K + 1)``: column k is ``q^(k)(0) / k!``; None for a long segment."""
@@ -997,11 +1052,35 @@ class TaylorSegment(ModalSegment):
                                           self.beta1)
         return self._taylor
 
+    def _taylor_coefficients(self, c_modal: np.ndarray) -> list[float]:
+        """``Re(c' q^(k)(0)) / k!``, k = 0 .. K: the Taylor coefficients of ``g = c' z`` at 0
+        (the columns must exist), remembered for the array last asked (start_values, then
+        evaluator, for one search)."""
+        hit = self._coefficients
+        if hit is None or hit[0] is not c_modal:
+            hit = self._coefficients = (c_modal, (c_modal @ self._taylor).real.tolist())
+        return hit[1]
+
+    def start_values(self, c_modal: np.ndarray, c_modal_abs: np.ndarray) -> tuple[list[float], list[float]]:
+        """:meth:`ModalSegment.start_values` with the slope and curvature from the Taylor
+        coefficients (``g'(0) = a_1``, ``g''(0) = 2 a_2``) and the magnitudes from the first three
+        columns (``|q''(0)| = 2 |q''(0) / 2|``) in one product: the value at 0 (which a search
+        at its limit shifts its offset by) as the modal form computes it; the others decide
+        only (round-off tolerances, exclusion bounds), to round-off."""
+        columns = self.taylor()
+        if columns is None:
+            return super().start_values(c_modal, c_modal_abs)
+        a = self._taylor_coefficients(c_modal)
+        if self._abs3 is None:
+            self._abs3 = np.abs(columns[:, :3])
+        m0, m1, m2 = (c_modal_abs @ self._abs3).tolist()
+        return [float((c_modal @ self.q0).real), a[1], 2.0 * a[2]], [m0, m1, 2.0 * m2]
+
     def evaluator(self, c_modal: np.ndarray, count: int):
         columns = self.taylor() if count <= _TAYLOR_DERIVATIVES + 1 else None
         if columns is None:
             return super().evaluator(c_modal, count)
-        a = (c_modal @ columns).real.tolist()           # Taylor coefficients of g at 0
+        a = self._taylor_coefficients(c_modal)          # Taylor coefficients of g at 0
         if count == 3:
             # what the searches ask: g, g', g'' in one Horner pass (value, slope, half curvature)
             highest_first = a[::-1]
@@ -1087,9 +1166,9 @@ class TaylorSegment(ModalSegment):
                 self._ramp = np.abs(self.beta1)
             powers = self.cfg.lam_powers
             weights = c_modal_abs
-            amp0 = weights @ (powers * self._amp0[:, None])
-            ramp = weights @ (powers * self._ramp[:, None])
-            parts = {k: (float(amp0[k - 1]), float(ramp[k - 1]), float(ramp[k - 2])) for k in range(2, 6)}
+            amp0 = (weights @ (powers * self._amp0[:, None])).tolist()
+            ramp = (weights @ (powers * self._ramp[:, None])).tolist()
+            parts = {k: (amp0[k - 1], ramp[k - 1], ramp[k - 2]) for k in range(2, 6)}
             hit = self._bounds[key] = (c_modal_abs, parts)
         return hit[1]
 

@@ -530,3 +530,70 @@ def test_taylor_scan_equals_the_segment_and_its_scan_vector(rho):
             size = np.abs(cfg.energies(q0, b0, b1, w, s))
             for g, e, m in zip(got_e, want_e, size):
                 assert abs(g - e) <= 1e-12 * max(m, abs(e))
+
+
+def test_a_taylor_segments_scan_of_parts_is_the_scan_of_its_vector():
+    """Scan.of_parts (the ad hoc path's Scan from TaylorScan.state_and_values' G and W z'(0),
+    without the vector) against Scan of TaylorScan.state_and_scan's vector, at the end and
+    inside, with and without a ground-acceleration slope: the same G and B, bit for bit (the
+    same numbers in another container), and the same end state; the grid remembered for a
+    span (Configuration.taylor_grid) gives the same numbers at its second use."""
+    from fmu_src.linear_response import Scan, TaylorScan
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = 0.8 / cfg.rate
+    rng = np.random.default_rng(11)
+    for trial in range(4):
+        z0 = rng.normal(size=2 * n) * np.concatenate([np.full(n, 0.02), np.full(n, 0.2)])
+        slope = 0.0 if trial == 0 else rng.normal() * 300.0
+        w = np.concatenate([[rng.normal() * 3.0, slope], rng.normal(size=n) * 1e5])
+        poly = TaylorScan(TaylorSegment(cfg, z0, w, length))
+        for s in (length, 0.37 * length, length):
+            z1, vector = poly.state_and_scan(s)
+            z2, G = poly.state_and_values(s)
+            want, got = Scan(cfg, vector, slope, s), Scan.of_parts(cfg, G, poly.rate0, slope, s)
+            np.testing.assert_array_equal(z1, z2)
+            np.testing.assert_array_equal(got.G, want.G)
+            np.testing.assert_array_equal(got.B, want.B)
+
+
+def test_the_stacked_modal_forcing_gives_each_product_bit_for_bit():
+    """Configuration.modal forms beta0 and beta1 by one product with [W B0; W B1]: the rows of a
+    matrix-vector product are the same dot products whatever rows are stacked with them, so
+    the values are those of the separate products (what the segment maps and every event
+    time were computed from), bit for bit, for the elastic and a yielding configuration."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    elastic = Configuration(b.masses, b.C, b.stiffnesses)
+    rng = np.random.default_rng(12)
+    for c in (cfg, elastic):
+        for trial in range(20):
+            z0 = rng.normal(size=2 * n)
+            w = np.concatenate([rng.normal(size=2) * 100.0, rng.normal(size=n) * 1e5])
+            q0, beta0, beta1 = c.modal(z0, w)
+            np.testing.assert_array_equal(q0, c.W @ z0)
+            np.testing.assert_array_equal(beta0, (c.W @ c.B0) @ w)
+            np.testing.assert_array_equal(beta1, (c.W @ c.B1) @ w)
+
+
+def test_a_taylor_segments_start_values_are_the_modal_ones():
+    """TaylorSegment.start_values (the slope and curvature at 0 from the Taylor coefficients, the
+    magnitudes from the first three columns) against ModalSegment.start_values: the value at 0
+    bit for bit (a search at its limit shifts its offset by it), the others within 1e-13 of
+    their magnitudes (round-off of the same sums in another order; they only decide)."""
+    b, cfg = yielding_configuration()
+    n = cfg.n
+    length = 1.2 / cfg.rate
+    rng = np.random.default_rng(13)
+    for trial in range(10):
+        z0 = rng.normal(size=2 * n) * np.concatenate([np.full(n, 0.02), np.full(n, 0.2)])
+        w = np.concatenate([[rng.normal() * 3.0, rng.normal() * 300.0], rng.normal(size=n) * 1e5])
+        c = rng.normal(size=2 * n) @ cfg.V
+        c_abs = np.abs(c)
+        got, got_scale = TaylorSegment(cfg, z0, w, length).start_values(c, c_abs)
+        want, want_scale = ModalSegment(cfg, z0, w).start_values(c, c_abs)
+        assert got[0] == want[0]
+        for k in (1, 2):
+            assert abs(got[k] - want[k]) <= 1e-13 * want_scale[k]
+        for g, m in zip(got_scale, want_scale):
+            assert abs(g - m) <= 1e-13 * m

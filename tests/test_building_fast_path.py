@@ -212,7 +212,7 @@ def test_the_knot_step_peak_tests_together_decide_as_one_per_interval(monkeypatc
         two_n = 2 * self.n
         for y, vector, row in zip(Y, scans, flags):
             self._peaks(cfg, Scan(cfg, vector, float(y[two_n + 1]), length), None, state, y.copy(), p, length,
-                        xtol, cost, row)
+                        xtol, cost, row.tolist())
 
     runs = []
     for together in (True, False):
