@@ -32,8 +32,7 @@ from venvs import make_venv, pip_install
 from cosim.fmus import FMU_NAMES
 from fmu_src.fmi_slave import HOST_REQUIREMENTS
 
-#: one pytest-xdist worker runs the module: its environment (host_python) is made once
-pytestmark = [pytest.mark.venv, pytest.mark.xdist_group("fmu_hosts")]
+pytestmark = pytest.mark.venv
 
 #: building.fmu started at x0[1] = 1 cm, free vibration: closed form below
 X0 = 0.01

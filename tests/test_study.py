@@ -22,11 +22,6 @@ from cosim.apps.study import (StudyError, case_id, case_row, load_study, plot_re
                          run_study)
 from study_helpers import SMALL, local_client
 
-#: every test that starts a Dask cluster (test_study.py, test_study_faults.py, test_study_cluster.py)
-#: runs on one pytest-xdist worker, one after another: two clusters of worker processes never
-#: compete for the cores, and a module's cluster is started once
-pytestmark = pytest.mark.xdist_group("dask")
-
 ROOT = Path(__file__).resolve().parents[1]
 
 # Columns that are pure functions of the simulation (wall times and worker names are not).

@@ -31,11 +31,6 @@ from cosim.apps.study import case_row, load_study, read_results, run_study
 from cosim.apps.study.loopback import LoopbackCluster
 from study_helpers import SMALL
 
-#: every test that starts a Dask cluster (test_study.py, test_study_faults.py, test_study_cluster.py)
-#: runs on one pytest-xdist worker, one after another: two clusters of worker processes never
-#: compete for the cores, and a module's cluster is started once
-pytestmark = pytest.mark.xdist_group("dask")
-
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE_COLUMNS = ("wall_time_s", "case_time_s", "worker")   # the only columns that depend on where a case ran
 STUDY_TIMEOUT_S = 120   # a study of these sizes takes seconds; a hang fails the test instead of the session

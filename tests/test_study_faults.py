@@ -25,11 +25,6 @@ from cosim.cli import main as cli_main
 from cosim.master.scene import Override
 from study_helpers import SMALL, local_client
 
-#: every test that starts a Dask cluster (test_study.py, test_study_faults.py, test_study_cluster.py)
-#: runs on one pytest-xdist worker, one after another: two clusters of worker processes never
-#: compete for the cores, and a module's cluster is started once
-pytestmark = pytest.mark.xdist_group("dask")
-
 SLOW = """
 name = "slow"
 scene = "default"

@@ -23,9 +23,7 @@ from cosim import __version__
 from cosim.master.runner import run_scene
 from fmu_src.ground_records import BUNDLED
 
-#: one pytest-xdist worker runs the module: the wheel and its environment (``installed``, ~16 s)
-#: are made once
-pytestmark = [pytest.mark.venv, pytest.mark.xdist_group("wheel")]
+pytestmark = pytest.mark.venv
 ROOT = Path(__file__).resolve().parents[1]
 
 
