@@ -48,7 +48,14 @@ HOST = textwrap.dedent('''
         r = simulate_fmu(name + ".fmu", stop_time=STOP[name], output_interval=0.01, start_values=START[name],
                          output=OUT[name])
         results[name] = {v: float(r[v][-1]) for v in OUT[name]}
-    print(json.dumps(results))
+    print(json.dumps(results), flush=True)
+    # end like the package's own programs (cosim.master.fmi.exit_process): with pythonfmu
+    # libraries loaded, the interpreter's normal exit now and then aborts on a corrupted heap
+    # after everything is printed (docs/studies.md, "Workers aborting at exit": cause not found;
+    # seen here twice in three runs of the suite on two workers under load, never in 420 runs of
+    # this script alone), which this test is not about
+    import os
+    os._exit(0)
 ''' % X0)
 
 

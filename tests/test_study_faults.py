@@ -106,16 +106,23 @@ def test_a_second_writer_is_refused_naming_the_first(tmp_path, fmu_dir, processe
     out = tmp_path / "out"
     first = start(command(study, out, fmu_dir, "--workers", "1", "--resume"), tmp_path, processes)
     wait_for(lambda: rows_in(out / "results.csv") >= 2, "2 rows", first)
-    t0 = time.monotonic()
-    second = subprocess.run(command(study, out, fmu_dir, "--workers", "1", "--resume"), cwd=tmp_path,
-                            capture_output=True, text=True, timeout=TIMEOUT_S)
-    refused_s = time.monotonic() - t0
+    # the first study, its Dask worker with it, held still (SIGSTOP to its process group) while
+    # the second starts: it still writes then whatever the load (with the suite on two workers,
+    # the second's start and imports once took longer than the first's 14 remaining cases)
+    os.killpg(first.pid, signal.SIGSTOP)
+    try:
+        t0 = time.monotonic()
+        second = subprocess.run(command(study, out, fmu_dir, "--workers", "1", "--resume"), cwd=tmp_path,
+                                capture_output=True, text=True, timeout=TIMEOUT_S)
+        refused_s = time.monotonic() - t0
+        assert first.poll() is None   # refused while the first was still writing
+    finally:
+        os.killpg(first.pid, signal.SIGCONT)
     assert second.returncode == 2, second.stderr
     assert "another study is writing here" in second.stderr and f"pid {first.pid} on host {os.uname().nodename}" \
         in second.stderr and " since 20" in second.stderr, second.stderr
     assert "Traceback" not in second.stderr and len(second.stderr.strip().splitlines()) == 1
     assert refused_s < 30   # the interpreter's start and imports; the lock is taken before anything runs
-    assert first.poll() is None   # refused while the first was still writing
     assert first.wait(TIMEOUT_S) == 0, first.communicate()
     _, rows = read_results(out / "results.csv")
     assert len(rows) == 16 and len({r["case_id"] for r in rows}) == 16
@@ -150,6 +157,7 @@ def test_lock_in_one_process_and_a_stale_lock_is_taken_over(tmp_path, fmu_dir, c
 
 
 # -- bounded work ----------------------------------------------------------------------------------
+@pytest.mark.exclusive   # asserts a wall time: no other test of the suite beside it (tests/conftest.py)
 def test_an_unbounded_study_is_refused_at_once(tmp_path, fmu_dir, capsys):
     """num = 100000000 under --dry-run (the attack: MemoryError after 105 s): exit 2 in well under
     5 s, naming the file, line, value and the limit; two axes whose product is beyond the limit
