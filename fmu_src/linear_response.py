@@ -709,9 +709,7 @@ class Configuration:
         grid = self._taylor_grids.get(key)
         if grid is None:
             K = degree
-            powers = np.full(K + 1, s).cumprod()     # (the method: np.cumprod's wrapper costs as much)
-            powers[1:] = powers[:-1]
-            powers[0] = 1.0
+            powers = _powers_of(s, K + 1)
             P = np.zeros((K + 1, 6))
             P[0, 0] = 1.0
             P[:, 1] = powers
@@ -1122,10 +1120,7 @@ class TaylorSegment(ModalSegment):
         columns = self.taylor()
         if columns is None:
             return self.cfg.state_at(self.q0, self.beta0, self.beta1, s)
-        powers = np.full(columns.shape[1], s).cumprod()
-        powers[1:] = powers[:-1]
-        powers[0] = 1.0
-        return (self.cfg.V @ (columns @ powers)).real
+        return (self.cfg.V @ (columns @ _powers_of(s, columns.shape[1]))).real
 
     def energies(self, w: np.ndarray, length: float):
         """:meth:`Configuration.energies` over ``[0, length]`` (``length <= self.length``)."""
@@ -1176,6 +1171,15 @@ class TaylorSegment(ModalSegment):
 TAYLOR_MAX_SPAN = 2.0        # max|lam| L up to which TaylorSegment evaluates by polynomial
 TAYLOR_TRUNCATION = 1e-17    # its truncation, relative to the modal amplitude of the derivative
 _TAYLOR_DERIVATIVES = 2      # the highest derivative the searches ask of a polynomial (g'')
+def _powers_of(s: float, count: int) -> np.ndarray:
+    """``[1, s, s^2, .., s^(count-1)]`` as the running product of ``s`` (the Taylor polynomials'
+    power row; the method, not ``np.cumprod``, whose wrapper costs as much as the product)."""
+    powers = np.full(count, s).cumprod()
+    powers[1:] = powers[:-1]
+    powers[0] = 1.0
+    return powers
+
+
 _DEGREES = np.arange(64, dtype=float)          # k, and k (k - 1): the powers' slopes and curvatures (TaylorScan)
 _DEGREES2 = _DEGREES * (_DEGREES - 1.0)
 
